@@ -1,0 +1,415 @@
+"""Front end: from decoded input signals to time-aligned physical samples.
+
+Per wheel-speed (trigger) frame the front end
+
+1. keeps the last few wheel-speed samples and fits a local quadratic in time through them
+   (a Savitzky–Golay filter that uses the real timestamps, so jitter and dropped frames do not
+   bias the derivative); the derivative is taken at the centre of the window, so every other
+   signal is evaluated at that same, delayed instant and all carry the same delay;
+2. interpolates the other messages (accelerations, pressures, reference speed, drive torque),
+   which arrive with their own phase, at that instant;
+3. estimates the vehicle speed (reference sensor when present and fresh, otherwise an
+   accelerometer-driven observer corrected by the wheels), the accelerometer offset and a
+   brake-gain correction from the body equation (pads move ±20 % in service);
+4. computes normal loads (model.md, physics signs), tyre forces from the wheel equation,
+   utilised friction and slip, and gates each wheel's sample.
+
+Pure numerics: it knows canonical signal names, not CAN.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from .samples import PhysicalSample
+from .vehicle import GRAVITY_MPS2, VehicleParams
+
+WHEEL_SPEED_NAMES = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
+PRESSURE_NAMES = ("brake_pressure_fl", "brake_pressure_fr", "brake_pressure_rl", "brake_pressure_rr")
+DRIVE_TORQUE_NAMES = ("drive_torque_fl", "drive_torque_fr", "drive_torque_rl", "drive_torque_rr")
+REQUIRED_INPUTS = WHEEL_SPEED_NAMES + ("accel_long", "accel_lat") + PRESSURE_NAMES
+OPTIONAL_INPUTS = ("yaw_rate", "vehicle_speed_ref") + DRIVE_TORQUE_NAMES
+
+# Plausibility limits of physical inputs; beyond them a sensor is broken, not the road special.
+MAX_WHEEL_SPEED_RADPS = 400.0
+MAX_ABS_ACCEL_MPS2 = 30.0
+MAX_PRESSURE_BAR = 350.0
+MAX_SPEED_MPS = 120.0
+
+
+@dataclass(frozen=True, slots=True)
+class FrontEndOptions:
+    """Front-end tuning; field names are the config keys under `frontend:`."""
+
+    derivative_window: int = 7            # wheel-speed samples in the local quadratic fit (odd)
+    min_speed: float = 3.0                # m/s; below it slip is ill-conditioned
+    max_slip: float = 0.6                 # samples beyond it (near lock) are not used
+    min_brake_pressure: float = 3.0       # bar above push-out for a wheel to count as braked
+    stale_periods: float = 3.0            # an input older than this many periods is stale
+    default_period: float = 0.01          # s, when the DBC gives no cycle time
+    spike_threshold: float = 2.0          # rad/s deviation from the local fit that marks a glitch
+    max_gap: float = 0.25                 # s between wheel-speed frames before the filter restarts
+    speed_gain_up: float = 0.3            # observer gain when wheels read faster than the estimate
+    speed_gain_down: float = 0.004        # ... and when they read slower (braked wheels slip)
+    speed_gain_free_rolling: float = 0.15
+    accel_bias_time_constant: float = 3.0   # s, accelerometer offset learning while free rolling
+    brake_gain_correction: bool = True
+    brake_gain_time_constant: float = 0.7   # s
+    brake_gain_min_decel: float = 1.5       # m/s^2 of deceleration before the body equation is used
+    brake_gain_limits: float = 0.35         # correction stays within 1 ± this
+
+
+@dataclass(slots=True)
+class FrontEndResult:
+    """Outcome of one trigger frame."""
+
+    sample: PhysicalSample | None       # None while the filter warms up or after a fault
+    stale_messages: tuple[str, ...] = ()
+    fault: str | None = None
+
+
+class _MessageHistory:
+    """The last few values of one input message, for interpolation and staleness."""
+
+    __slots__ = ("times", "values", "period_s", "last_arrival_s", "merged")
+
+    def __init__(self, period_s: float) -> None:
+        self.times: deque[float] = deque(maxlen=16)
+        self.values: deque[dict[str, float]] = deque(maxlen=16)
+        self.period_s = period_s
+        self.last_arrival_s = -math.inf
+        self.merged: dict[str, float] = {}
+
+    def push(self, time_s: float, values: Mapping[str, float]) -> None:
+        if self.times and time_s < self.times[-1]:
+            # Time went backwards (log splice, clock step): the old history means nothing now.
+            self.times.clear()
+            self.values.clear()
+        # Multiplexed messages deliver part of their signals per frame: keep the rest.
+        self.merged = {**self.merged, **values}
+        self.times.append(time_s)
+        self.values.append(self.merged)
+        self.last_arrival_s = time_s
+
+    def value_at(self, time_s: float, name: str) -> float | None:
+        times = self.times
+        if not times:
+            return None
+        if time_s >= times[-1]:
+            return self.values[-1].get(name)
+        for k in range(len(times) - 1, 0, -1):
+            t0 = times[k - 1]
+            if t0 <= time_s:
+                t1 = times[k]
+                v0 = self.values[k - 1].get(name)
+                v1 = self.values[k].get(name)
+                if v0 is None or v1 is None:
+                    return v1 if v1 is not None else v0
+                w = (time_s - t0) / (t1 - t0) if t1 > t0 else 1.0
+                return v0 + w * (v1 - v0)
+        return self.values[0].get(name)
+
+
+class FrontEnd:
+    """Turns decoded inputs into `PhysicalSample`s, one per trigger (wheel-speed) message."""
+
+    def __init__(
+        self,
+        vehicle: VehicleParams,
+        options: FrontEndOptions,
+        message_signals: Mapping[str, Iterable[str]],
+        message_periods: Mapping[str, float | None],
+        trigger_message: str,
+    ) -> None:
+        if options.derivative_window < 3 or options.derivative_window % 2 == 0:
+            raise ValueError("frontend.derivative_window must be an odd number >= 3")
+        self.vehicle = vehicle
+        self.options = options
+        self.trigger_message = trigger_message
+        self._signal_message: dict[str, str] = {}
+        for message, names in message_signals.items():
+            for name in names:
+                self._signal_message[name] = message
+        self.required_messages = frozenset(
+            self._signal_message[n] for n in REQUIRED_INPUTS if n in self._signal_message
+        )
+        missing = [n for n in REQUIRED_INPUTS if n not in self._signal_message]
+        if missing:
+            raise ValueError(f"required inputs not mapped: {', '.join(missing)}")
+        self._history = {
+            m: _MessageHistory(p if p and p > 0 else options.default_period)
+            for m, p in message_periods.items()
+        }
+        for m in message_signals:
+            self._history.setdefault(m, _MessageHistory(options.default_period))
+        self._has_ref_speed = "vehicle_speed_ref" in self._signal_message
+        self._has_drive_torque = all(n in self._signal_message for n in DRIVE_TORQUE_NAMES)
+        self._has_yaw_rate = "yaw_rate" in self._signal_message
+        self.reset()
+
+    # -- state -----------------------------------------------------------------------------
+    def reset(self) -> None:
+        n = self.options.derivative_window
+        self._wheel_times: deque[float] = deque(maxlen=n)
+        self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
+        self._speed_estimate_mps: float | None = None
+        self._speed_time_s: float | None = None
+        self._accel_bias_mps2 = 0.0
+        self._brake_gain_factor = 1.0
+        self._last_trigger_s = -math.inf
+
+    @property
+    def brake_gain_factor(self) -> float:
+        return self._brake_gain_factor
+
+    @property
+    def accel_bias_mps2(self) -> float:
+        return self._accel_bias_mps2
+
+    # -- staleness ---------------------------------------------------------------------------
+    def stale_messages(self, now_s: float) -> tuple[str, ...]:
+        """Required messages whose last frame is older than `stale_periods` of their period."""
+        limit = self.options.stale_periods
+        stale = []
+        for m in self.required_messages:
+            h = self._history[m]
+            if now_s - h.last_arrival_s > limit * h.period_s + 1e-3:
+                stale.append(m)
+        return tuple(sorted(stale))
+
+    def period_of(self, message: str) -> float:
+        return self._history[message].period_s
+
+    # -- main entry --------------------------------------------------------------------------
+    def push(self, time_s: float, message: str, values: Mapping[str, float]) -> FrontEndResult | None:
+        """Feed one decoded message; returns a result only for the trigger message."""
+        history = self._history.get(message)
+        if history is None:
+            return None
+        history.push(time_s, values)
+        if message != self.trigger_message:
+            return None
+        return self._on_trigger(time_s, history)
+
+    def _on_trigger(self, time_s: float, history: _MessageHistory) -> FrontEndResult:
+        opts = self.options
+        stale = self.stale_messages(time_s)
+        values = history.merged
+        try:
+            speeds = tuple(float(values[n]) for n in WHEEL_SPEED_NAMES)
+        except KeyError:
+            return FrontEndResult(None, stale, None)
+        if any(not (0.0 <= w <= MAX_WHEEL_SPEED_RADPS) for w in speeds):
+            self._wheel_times.clear()
+            self._wheel_speeds.clear()
+            return FrontEndResult(None, stale, "wheel speed out of range")
+
+        dt = time_s - self._last_trigger_s
+        if dt <= 0.0 or dt > opts.max_gap:
+            # A gap or a jump back in time: the derivative window must not straddle it.
+            self._wheel_times.clear()
+            self._wheel_speeds.clear()
+            self._speed_time_s = None
+        self._last_trigger_s = time_s
+        self._wheel_times.append(time_s)
+        self._wheel_speeds.append(speeds)  # type: ignore[arg-type]
+        if len(self._wheel_times) < opts.derivative_window:
+            return FrontEndResult(None, stale, None)
+        if stale:
+            return FrontEndResult(None, stale, None)
+        return self._compute_sample(stale)
+
+    # -- the physics ---------------------------------------------------------------------------
+    def _fit_wheels(self) -> tuple[float, np.ndarray, np.ndarray, bool]:
+        """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch)."""
+        times = np.fromiter(self._wheel_times, dtype=float, count=len(self._wheel_times))
+        speeds = np.array(self._wheel_speeds, dtype=float)
+        centre = len(times) // 2
+        t_c = float(times[centre])
+        tau = times - t_c
+        design = np.empty((len(tau), 3))
+        design[:, 0] = 1.0
+        design[:, 1] = tau
+        design[:, 2] = tau * tau
+        coef, *_ = np.linalg.lstsq(design, speeds, rcond=None)
+        residual = speeds - design @ coef
+        glitch = bool(np.max(np.abs(residual)) > self.options.spike_threshold)
+        return t_c, coef[0], coef[1], glitch
+
+    def _value(self, name: str, time_s: float) -> float | None:
+        message = self._signal_message.get(name)
+        if message is None:
+            return None
+        return self._history[message].value_at(time_s, name)
+
+    def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
+        opts = self.options
+        veh = self.vehicle
+        t_c, omega, omega_dot, glitch = self._fit_wheels()
+
+        accel_long_raw = self._value("accel_long", t_c)
+        accel_lat = self._value("accel_lat", t_c)
+        pressures = [self._value(n, t_c) for n in PRESSURE_NAMES]
+        if accel_long_raw is None or accel_lat is None or any(p is None for p in pressures):
+            return FrontEndResult(None, stale, None)
+        if abs(accel_long_raw) > MAX_ABS_ACCEL_MPS2 or abs(accel_lat) > MAX_ABS_ACCEL_MPS2:
+            return FrontEndResult(None, stale, "acceleration out of range")
+        if any(not (-1.0 <= p <= MAX_PRESSURE_BAR) for p in pressures):  # type: ignore[operator]
+            return FrontEndResult(None, stale, "brake pressure out of range")
+        drive = [0.0, 0.0, 0.0, 0.0]
+        if self._has_drive_torque:
+            for i, n in enumerate(DRIVE_TORQUE_NAMES):
+                v = self._value(n, t_c)
+                drive[i] = v if v is not None and math.isfinite(v) else 0.0
+
+        radius = veh.wheel_radius
+        wheel_linear = [radius * float(w) for w in omega]
+        braked = [p - veh.brake_pushout_pressure > opts.min_brake_pressure for p in pressures]  # type: ignore[operator]
+        braking = any(braked)
+        driving = self._has_drive_torque and any(abs(d) > 20.0 for d in drive)
+
+        accel_long = accel_long_raw - self._accel_bias_mps2
+        speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, braking or driving)
+        if not braking and not driving:
+            self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
+
+        yaw_rate = self._value("yaw_rate", t_c) if self._has_yaw_rate else None
+        if yaw_rate is None or not math.isfinite(yaw_rate):
+            yaw_rate = accel_lat / speed if speed > opts.min_speed else 0.0
+
+        loads = veh.normal_forces(accel_long, accel_lat)
+        brake_torques = [veh.brake_torque_nm(i, p) for i, p in enumerate(pressures)]  # type: ignore[arg-type]
+        inertia_torques = [veh.wheel_inertia * float(a) for a in omega_dot]
+        if opts.brake_gain_correction:
+            self._update_brake_gain(accel_long, speed, inertia_torques, brake_torques, drive)
+        gain = self._brake_gain_factor
+
+        slips = []
+        forces = []
+        mus = []
+        usable = []
+        half_tracks = (veh.track_front / 2, veh.track_front / 2, veh.track_rear / 2, veh.track_rear / 2)
+        for i in range(4):
+            # Each wheel's own ground speed: in a turn the outer wheels travel faster.
+            side = -1.0 if i in (0, 2) else 1.0
+            ground = speed + side * yaw_rate * half_tracks[i]
+            denom = max(ground, wheel_linear[i])
+            slip = (ground - wheel_linear[i]) / denom if denom > 0.1 else 0.0
+            force = (inertia_torques[i] + gain * brake_torques[i] - drive[i]) / radius
+            load = loads[i]
+            mu = force / load if load > 50.0 else 0.0
+            ok = (
+                speed >= opts.min_speed
+                and abs(slip) <= opts.max_slip
+                and (braked[i] or (self._has_drive_torque and abs(drive[i]) > 20.0))
+                and load > 50.0
+                and not glitch
+                and math.isfinite(mu)
+            )
+            slips.append(slip)
+            forces.append(force)
+            mus.append(mu)
+            usable.append(bool(ok))
+
+        sample = PhysicalSample(
+            time_s=t_c,
+            speed_mps=speed,
+            slip=tuple(slips),  # type: ignore[arg-type]
+            mu_used=tuple(mus),  # type: ignore[arg-type]
+            normal_force_n=tuple(loads),
+            tyre_force_n=tuple(forces),  # type: ignore[arg-type]
+            usable=tuple(usable),  # type: ignore[arg-type]
+            braking=braking,
+            speed_from_reference=from_ref,
+        )
+        return FrontEndResult(sample, stale, "wheel speed glitch" if glitch else None)
+
+    def _update_speed(
+        self, time_s: float, wheel_linear: list[float], accel_long: float, wheels_loaded: bool
+    ) -> tuple[float, bool]:
+        opts = self.options
+        dt = 0.0 if self._speed_time_s is None else time_s - self._speed_time_s
+        self._speed_time_s = time_s
+        ref = self._value("vehicle_speed_ref", time_s) if self._has_ref_speed else None
+        if ref is not None and self._ref_fresh(time_s) and 0.0 <= ref <= MAX_SPEED_MPS:
+            self._speed_estimate_mps = ref
+            return ref, True
+        fastest = max(wheel_linear)
+        mean = sum(wheel_linear) / 4.0
+        v = self._speed_estimate_mps
+        if v is None or dt <= 0.0 or dt > opts.max_gap:
+            v = fastest
+        else:
+            v = v + accel_long * dt
+            if not wheels_loaded:
+                v += opts.speed_gain_free_rolling * (mean - v)
+            elif fastest > v:
+                v += opts.speed_gain_up * (fastest - v)
+            else:
+                # Braked wheels all read low during ABS; lean on them only weakly, so an
+                # accelerometer offset cannot make the estimate drift without bound.
+                v += opts.speed_gain_down * (fastest - v)
+        v = min(max(v, 0.0), MAX_SPEED_MPS)
+        self._speed_estimate_mps = v
+        return v, False
+
+    def _ref_fresh(self, time_s: float) -> bool:
+        message = self._signal_message["vehicle_speed_ref"]
+        h = self._history[message]
+        return time_s - h.last_arrival_s <= self.options.stale_periods * h.period_s + 1e-3 or (
+            h.times and h.times[-1] >= time_s
+        )
+
+    def _learn_accel_bias(self, time_s: float, omega_dot: np.ndarray, accel_long_raw: float) -> None:
+        # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
+        # (or road grade, which the same correction absorbs).
+        wheel_accel = self.vehicle.wheel_radius * float(np.mean(omega_dot))
+        alpha = min(1.0, self.options.default_period / max(self.options.accel_bias_time_constant, 1e-3))
+        error = accel_long_raw - wheel_accel
+        if abs(error) < 2.0:
+            self._accel_bias_mps2 += alpha * (error - self._accel_bias_mps2)
+
+    def _update_brake_gain(
+        self,
+        accel_long: float,
+        speed: float,
+        inertia_torques: list[float],
+        brake_torques: list[float],
+        drive: list[float],
+    ) -> None:
+        """Body equation M dv/dt = −ΣF_x − B v − D v² as an independent check on brake force."""
+        opts = self.options
+        veh = self.vehicle
+        decel = -accel_long
+        total_brake = sum(brake_torques)
+        if decel < opts.brake_gain_min_decel or total_brake < 1.0:
+            return
+        drag = veh.rolling_resistance * speed + veh.drag_area_coefficient * speed * speed
+        total_force = veh.mass * decel - drag
+        other = sum(inertia_torques) - sum(drive)
+        measured_gain = (total_force * veh.wheel_radius - other) / total_brake
+        lim = opts.brake_gain_limits
+        measured_gain = min(max(measured_gain, 1.0 - lim), 1.0 + lim)
+        alpha = min(1.0, opts.default_period / max(opts.brake_gain_time_constant, 1e-3))
+        self._brake_gain_factor += alpha * (measured_gain - self._brake_gain_factor)
+
+
+def make_front_end(
+    vehicle: VehicleParams,
+    options: FrontEndOptions,
+    messages: Iterable[Any],
+    trigger_message: str,
+) -> FrontEnd:
+    """Build from message descriptions having `name`, `period_s` and `signals` (canonical names)."""
+    messages = list(messages)
+    return FrontEnd(
+        vehicle,
+        options,
+        {m.name: tuple(m.signals) for m in messages},
+        {m.name: m.period_s for m in messages},
+        trigger_message,
+    )

@@ -1,0 +1,158 @@
+"""The whole chain for one bus: frames → decoded signals → physical samples → estimate → frames.
+
+Shared by `replay`, `run` and `demo`, so the live daemon and the offline replay compute the
+same thing from the same frames.
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from .codec import DecodeFailure, InputCodec, OutputCodec, load_databases
+from .config import Config
+from .frames import Frame
+from .frontend import FrontEnd, FrontEndResult, make_front_end
+from .samples import FrictionEstimate, PhysicalSample, Status
+
+
+def make_estimator(config: Config) -> Any:
+    """The estimator named by `estimator.kind`."""
+    kind = config.estimator.kind
+    if kind == "lugre-tr":
+        from .estimator import LugreTrustRegionEstimator
+
+        return LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle)
+    if kind == "burckhardt-rls":
+        from .baseline_rls import BurckhardtRLSEstimator
+
+        return BurckhardtRLSEstimator(config.estimator.burckhardt_rls, config.vehicle)
+    raise ValueError(f"estimator.kind: unknown estimator {kind!r}")
+
+
+@dataclass
+class PipelineStats:
+    frames_read: int = 0
+    input_frames: int = 0
+    ignored_frames: int = 0
+    error_frames: int = 0
+    undecodable: Counter = field(default_factory=Counter)
+    updates: int = 0
+    frames_out: int = 0
+    status_updates: Counter = field(default_factory=Counter)
+    faults: Counter = field(default_factory=Counter)
+
+    @property
+    def undecodable_total(self) -> int:
+        return sum(self.undecodable.values())
+
+
+class Pipeline:
+    """Feeds frames through codec, front end and estimator; returns the frames to send."""
+
+    def __init__(self, config: Config, estimator: Any | None = None) -> None:
+        self.config = config
+        input_db = load_databases(config.can.dbc, strict=config.can.dbc_strict)
+        output_db = load_databases([config.can.output_dbc], strict=True)
+        self.input_codec = InputCodec(input_db, config.signals, config.vehicle.wheel_radius)
+        self.output_codec = OutputCodec(output_db)
+        messages = self.input_codec.input_messages()
+        trigger = next(m.name for m in messages if m.frame_id == self.input_codec.trigger_id)
+        self.front_end: FrontEnd = make_front_end(config.vehicle, config.frontend, messages, trigger)
+        self.trigger_message = trigger
+        self.estimator = estimator if estimator is not None else make_estimator(config)
+        self.stats = PipelineStats()
+        self.last_estimate: FrictionEstimate | None = None
+        self.last_sample: PhysicalSample | None = None
+        self.last_result: FrontEndResult | None = None
+        self._last_valid: FrictionEstimate | None = None
+        self._last_output_s = -math.inf
+        self._last_trigger_s = -math.inf
+        self._wheel_divider = max(1, int(config.output.wheel_divider))
+
+    # ------------------------------------------------------------------------------------------
+    def process(self, frame: Frame) -> list[Frame]:
+        """One received frame in; the output frames it causes (empty for most frames)."""
+        stats = self.stats
+        stats.frames_read += 1
+        if frame.is_error:
+            stats.error_frames += 1
+            return []
+        if frame.is_remote or frame.is_extended and frame.can_id not in self.input_codec.input_ids:
+            stats.ignored_frames += 1
+            return []
+        try:
+            decoded = self.input_codec.decode(frame)
+        except DecodeFailure as exc:
+            stats.undecodable[str(exc.reason if hasattr(exc, "reason") else exc)] += 1
+            return []
+        if decoded is None:
+            stats.ignored_frames += 1
+            return []
+        stats.input_frames += 1
+        result = self.front_end.push(decoded.time_s, decoded.message, decoded.values)
+        if result is None:
+            return []
+        self._last_trigger_s = frame.time_s
+        return self._update(frame.time_s, result)
+
+    def tick(self, now_s: float) -> list[Frame]:
+        """Call when no trigger frame has arrived for a while: reports a stale trigger input."""
+        period = self.front_end.period_of(self.trigger_message)
+        limit = self.config.frontend.stale_periods * period
+        if now_s - self._last_trigger_s <= limit or now_s - self._last_output_s < period:
+            return []
+        stale = self.front_end.stale_messages(now_s)
+        if not stale:
+            return []
+        return self._emit(now_s, self._held_estimate(now_s, Status.INPUT_STALE), None)
+
+    # ------------------------------------------------------------------------------------------
+    def _held_estimate(self, time_s: float, status: Status) -> FrictionEstimate:
+        """The last known estimate, relabelled: MuMax must not be trusted under this status."""
+        prev = self._last_valid or self.last_estimate
+        if prev is None:
+            return FrictionEstimate(time_s, status, 0.0, 0.0, 1.0, 0.0)
+        return FrictionEstimate(
+            time_s, status, prev.mu_max, prev.slip_at_mu_max, prev.theta, 0.0, prev.wheel_mu_max, math.inf
+        )
+
+    def _update(self, time_s: float, result: FrontEndResult) -> list[Frame]:
+        self.last_result = result
+        if result.stale_messages:
+            estimate = self._held_estimate(time_s, Status.INPUT_STALE)
+        elif result.fault is not None and result.sample is None:
+            self.stats.faults[result.fault] += 1
+            estimate = self._held_estimate(time_s, Status.FAULT)
+        elif result.sample is None:
+            # Filter warming up (start, or after a gap): repeat what we last said.
+            prev = self.last_estimate
+            if prev is None or prev.status in (Status.INPUT_STALE, Status.FAULT):
+                estimate = self._held_estimate(
+                    time_s, Status.INIT if self._last_valid is None else Status.NOT_EXCITED
+                )
+            else:
+                estimate = replace(prev, time_s=time_s)
+        else:
+            if result.fault is not None:
+                self.stats.faults[result.fault] += 1
+            self.last_sample = result.sample
+            estimate = self.estimator.update(result.sample)
+            if estimate.status == Status.VALID:
+                self._last_valid = estimate
+        self.last_estimate = estimate
+        return self._emit(time_s, estimate, self.last_sample)
+
+    def _emit(self, time_s: float, estimate: FrictionEstimate, sample: PhysicalSample | None) -> list[Frame]:
+        stats = self.stats
+        stats.updates += 1
+        stats.status_updates[estimate.status] += 1
+        self._last_output_s = time_s
+        codec = self.output_codec
+        frames = [Frame(time_s, codec.estimate_id, codec.encode_estimate(estimate))]
+        if sample is not None and stats.updates % self._wheel_divider == 0:
+            for payload in codec.encode_wheels(estimate, sample):
+                frames.append(Frame(time_s, codec.wheel_id, payload))
+        stats.frames_out += len(frames)
+        return frames

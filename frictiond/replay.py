@@ -1,0 +1,114 @@
+"""Offline replay of frames through a `Pipeline`, with a summary (shared by CLI and tests)."""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Protocol
+
+from .frames import Frame
+from .pipeline import Pipeline, PipelineStats
+from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
+
+
+class FrameSink(Protocol):
+    def write(self, frame: Frame) -> None: ...
+
+
+@dataclass
+class ReplayRecorder:
+    """Keeps every estimate and sample of a replay (for plots and tests)."""
+
+    estimates: list[FrictionEstimate] = field(default_factory=list)
+    samples: list[PhysicalSample] = field(default_factory=list)
+
+    def record(self, estimate: FrictionEstimate | None, sample: PhysicalSample | None) -> None:
+        if estimate is not None:
+            self.estimates.append(estimate)
+        if sample is not None and (not self.samples or self.samples[-1] is not sample):
+            self.samples.append(sample)
+
+
+@dataclass
+class ReplaySummary:
+    stats: PipelineStats
+    first_time_s: float | None
+    last_time_s: float | None
+    final: FrictionEstimate | None
+    trigger_period_s: float
+
+    def status_seconds(self) -> dict[str, float]:
+        return {
+            Status(s).name: n * self.trigger_period_s for s, n in sorted(self.stats.status_updates.items())
+        }
+
+    def format(self, truth_path: str | None = None) -> str:
+        s = self.stats
+        span = (self.last_time_s - self.first_time_s) if self.first_time_s is not None else 0.0
+        lines = [
+            f"frames read       {s.frames_read}  ({span:.2f} s of log)",
+            f"input frames      {s.input_frames}",
+            f"ignored frames    {s.ignored_frames}  (not inputs)",
+            f"error frames      {s.error_frames}",
+            f"undecodable       {s.undecodable_total}"
+            + ("" if not s.undecodable else "  (" + "; ".join(f"{k}: {v}" for k, v in s.undecodable.most_common(5)) + ")"),
+            f"updates           {s.updates}",
+            f"frames written    {s.frames_out}",
+            "time in status    " + ", ".join(f"{k} {v:.2f} s" for k, v in self.status_seconds().items()),
+        ]
+        if s.faults:
+            lines.append("faults            " + "; ".join(f"{k}: {v}" for k, v in s.faults.most_common(5)))
+        f = self.final
+        if f is not None:
+            wheels = " ".join(f"{w} {m:.3f}" for w, m in zip(WHEELS, f.wheel_mu_max))
+            lines.append(
+                f"final estimate    {f.status.name} MuMax {f.mu_max:.3f} at slip {f.slip_at_mu_max:.3f}, "
+                f"theta {f.theta:.3f}, confidence {f.confidence:.2f}"
+            )
+            lines.append(f"per wheel MuMax   {wheels}")
+        if truth_path:
+            truth = read_truth_csv(truth_path)
+            if truth and f is not None:
+                last = truth[-1]
+                lines.append(f"truth at end      mu_max {last['mu_max']:.3f}")
+        return "\n".join(lines)
+
+
+def replay_frames(
+    pipeline: Pipeline,
+    frames: Iterable[Frame],
+    sink: FrameSink | None = None,
+    recorder: ReplayRecorder | None = None,
+) -> ReplaySummary:
+    first = last = None
+    process = pipeline.process
+    for frame in frames:
+        if first is None:
+            first = frame.time_s
+        last = frame.time_s
+        out = process(frame)
+        if out:
+            if sink is not None:
+                for f in out:
+                    sink.write(f)
+            if recorder is not None:
+                recorder.record(pipeline.last_estimate, pipeline.last_sample)
+    return ReplaySummary(
+        pipeline.stats, first, last, pipeline.last_estimate, pipeline.front_end.period_of(pipeline.trigger_message)
+    )
+
+
+def read_truth_csv(path: str | Path) -> list[dict[str, float]]:
+    """Rows of a simulator truth CSV as floats (non-numeric cells become NaN)."""
+    rows = []
+    with open(path, newline="") as fh:
+        for row in csv.DictReader(fh):
+            parsed: dict[str, Any] = {}
+            for k, v in row.items():
+                try:
+                    parsed[k] = float(v)
+                except (TypeError, ValueError):
+                    parsed[k] = math.nan
+            rows.append(parsed)
+    return rows

@@ -1,0 +1,61 @@
+"""Plain data passed between the layers: physical samples in, friction estimates out.
+
+Nothing here knows about CAN or about a tyre model; both sides import it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+WHEELS: tuple[str, str, str, str] = ("FL", "FR", "RL", "RR")
+FRONT_WHEELS = (0, 1)
+REAR_WHEELS = (2, 3)
+LEFT_WHEELS = (0, 2)
+RIGHT_WHEELS = (1, 3)
+
+Quad = tuple[float, float, float, float]
+
+
+class Status(IntEnum):
+    """`EstimatorStatus` values of FRICTION_ESTIMATE (can-contract.md)."""
+
+    INIT = 0
+    NOT_EXCITED = 1
+    CONVERGING = 2
+    VALID = 3
+    INPUT_STALE = 4
+    FAULT = 5
+
+
+@dataclass(slots=True)
+class PhysicalSample:
+    """One time-aligned sample of the vehicle, produced by the front end per wheel-speed frame.
+
+    All quantities are SI. `time_s` is the instant the values describe (the front end
+    delays all signals equally so that the wheel-acceleration filter is centred).
+    """
+
+    time_s: float
+    speed_mps: float
+    slip: Quad
+    mu_used: Quad                 # utilised friction F_x / F_N per wheel
+    normal_force_n: Quad
+    tyre_force_n: Quad            # F_x per wheel, positive when retarding
+    usable: tuple[bool, bool, bool, bool]   # passed the front end's gates
+    braking: bool = False         # brake applied (pressure above push-out) on any wheel
+    speed_from_reference: bool = False
+
+
+@dataclass(slots=True)
+class FrictionEstimate:
+    """What the estimator reports after one update."""
+
+    time_s: float
+    status: Status
+    mu_max: float                 # road peak friction at the current speed
+    slip_at_mu_max: float
+    theta: float                  # LuGre road-condition parameter (1.0 for non-LuGre estimators' nominal)
+    confidence: float             # 0..1; only meaningful with VALID
+    wheel_mu_max: Quad = (0.0, 0.0, 0.0, 0.0)
+    mu_max_std: float = float("inf")
+    detail: dict[str, float] = field(default_factory=dict)

@@ -21,11 +21,17 @@ def add_config_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def load_config_or_exit(path: str | None):  # -> Config, or SystemExit(78)
+def load_config_or_exit(path: str | None, check_dbc: bool = True):  # -> Config, or SystemExit(78)
+    """The validated config, checked against its DBC(s); exit 78 with one line if unusable."""
     from ..config import ConfigError, default_config_path, load_config
 
     try:
-        return load_config(Path(path) if path else default_config_path())
+        config = load_config(Path(path) if path else default_config_path())
+        if check_dbc:
+            from ..codec import validate_against_dbc
+
+            validate_against_dbc(config)
+        return config
     except ConfigError as exc:
         print(f"frictiond: config error: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_CONFIG) from None

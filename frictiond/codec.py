@@ -1,0 +1,425 @@
+"""CAN payloads ↔ values: input frames through the config's signal map, output frames with E2E.
+
+The only module that imports cantools. Input values leave here in the canonical SI units of
+docs/architecture.md (rad/s, m/s², rad/s, bar, m/s, N·m), whatever the vehicle's DBC uses.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Mapping, NamedTuple, Sequence
+
+import cantools
+from cantools.database import Database
+
+from .config import ConfigError, SignalSource
+from .e2e import E2EChecker, protect
+from .frames import Frame
+from .frontend import OPTIONAL_INPUTS, REQUIRED_INPUTS
+from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
+
+ESTIMATE_MESSAGE = "FRICTION_ESTIMATE"
+WHEEL_MESSAGE = "FRICTION_WHEEL"
+GRAVITY_MPS2 = 9.80665
+
+# Quantity of each canonical input, and the units each quantity accepts (factor to SI).
+_QUANTITY = {
+    **{n: "wheel_speed" for n in REQUIRED_INPUTS if n.startswith("wheel_speed")},
+    "accel_long": "acceleration",
+    "accel_lat": "acceleration",
+    "yaw_rate": "angular_rate",
+    **{n: "pressure" for n in REQUIRED_INPUTS if n.startswith("brake_pressure")},
+    "vehicle_speed_ref": "speed",
+    **{n: "torque" for n in OPTIONAL_INPUTS if n.startswith("drive_torque")},
+}
+_DEG = math.pi / 180.0
+_UNITS: dict[str, dict[str, float | None]] = {
+    # None: "ground speed, divide by the wheel radius" (resolved per vehicle)
+    "wheel_speed": {"rad/s": 1.0, "1/s": 1.0, "rpm": 2 * math.pi / 60, "1/min": 2 * math.pi / 60,
+                    "deg/s": _DEG, "°/s": _DEG, "m/s": None, "km/h": None, "kph": None, "mph": None},
+    "acceleration": {"m/s^2": 1.0, "m/s²": 1.0, "m/s2": 1.0, "m/(s^2)": 1.0, "g": GRAVITY_MPS2},
+    "angular_rate": {"rad/s": 1.0, "deg/s": _DEG, "°/s": _DEG},
+    "pressure": {"bar": 1.0, "mbar": 1e-3, "kpa": 0.01, "mpa": 10.0, "pa": 1e-5, "psi": 0.0689475729},
+    "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704},
+    "torque": {"n.m": 1.0, "nm": 1.0, "n*m": 1.0, "n·m": 1.0, "knm": 1000.0},
+}
+_GROUND_SPEED = {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704}
+CANONICAL_UNIT = {"wheel_speed": "rad/s", "acceleration": "m/s^2", "angular_rate": "rad/s",
+                  "pressure": "bar", "speed": "m/s", "torque": "N.m"}
+
+
+class DecodeFailure(Exception):
+    """An input frame that cannot be turned into values; `reason` is a short counter key."""
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+
+
+def load_databases(paths: Sequence[Path | str], strict: bool = True) -> Database:
+    """Load one or several DBC files into one database; `ConfigError` names the bad file."""
+    db = Database(strict=strict)
+    for path in paths:
+        path = Path(path)
+        try:
+            db.add_dbc_file(str(path))
+        except FileNotFoundError:
+            raise ConfigError(f"{path}: no such DBC file") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{path}: cannot read DBC: {exc}") from None
+        except Exception as exc:  # cantools raises parser, value and key errors alike
+            text = " ".join(str(exc).split())[:200] or type(exc).__name__
+            hint = " (try can.dbc_strict: false)" if strict else ""
+            raise ConfigError(f"{path}: DBC does not parse: {text}{hint}") from None
+    if not db.messages:
+        raise ConfigError(f"{', '.join(map(str, paths))}: DBC defines no messages")
+    return db
+
+
+@dataclass(frozen=True, slots=True)
+class ResolvedSignal:
+    """One canonical input bound to a DBC signal, with its conversion to SI."""
+
+    name: str                    # canonical input name
+    message: str
+    signal: str
+    dbc_unit: str
+    unit: str                    # the unit assumed for the DBC's physical value
+    factor: float                # SI = (physical * scale + offset) * factor
+    scale: float
+    offset: float
+    multiplexer_ids: tuple[int, ...] | None
+    minimum: float | None
+    maximum: float | None
+    note: str = ""
+
+    def to_si(self, physical: float) -> float:
+        return (physical * self.scale + self.offset) * self.factor
+
+    def from_si(self, value: float) -> float:
+        return (value / self.factor - self.offset) / self.scale
+
+
+class InputMessage(NamedTuple):
+    name: str
+    frame_id: int
+    period_s: float | None
+    signals: tuple[str, ...]     # canonical names carried
+    length: int
+    is_multiplexed: bool
+
+
+class DecodedInput(NamedTuple):
+    time_s: float
+    message: str
+    values: dict[str, float]
+    is_trigger: bool
+
+
+def _resolve_unit(name: str, source: SignalSource, dbc_unit: str, wheel_radius: float) -> tuple[str, float, str]:
+    quantity = _QUANTITY[name]
+    table = _UNITS[quantity]
+    declared = source.unit if source.unit is not None else dbc_unit
+    note = ""
+    key = (declared or "").strip().lower().replace(" ", "")
+    lookup = {k.lower(): v for k, v in table.items()}
+    if not key:
+        key = CANONICAL_UNIT[quantity].lower()
+        note = f"no unit in DBC; assumed {CANONICAL_UNIT[quantity]}"
+    if key not in lookup:
+        where = "signals." + name + ".unit" if source.unit is not None else f"DBC unit of {source.message}.{source.signal}"
+        raise ConfigError(
+            f"signals.{name}: {where} {declared!r} is not a {quantity.replace('_', ' ')} unit "
+            f"(use one of {', '.join(table)}; set signals.{name}.unit to override)"
+        )
+    factor = lookup[key]
+    if factor is None:  # ground speed of the wheel → angular speed
+        factor = _GROUND_SPEED[key] / wheel_radius
+    return declared or CANONICAL_UNIT[quantity], factor, note
+
+
+def resolve_signals(db: Database, signals: Mapping[str, SignalSource], wheel_radius: float) -> list[ResolvedSignal]:
+    """Bind every mapped input to its DBC signal; `ConfigError` names each missing piece."""
+    resolved = []
+    for name, source in signals.items():
+        try:
+            message = db.get_message_by_name(source.message)
+        except KeyError:
+            raise ConfigError(f"signals.{name}: message {source.message!r} is not in the DBC") from None
+        try:
+            signal = message.get_signal_by_name(source.signal)
+        except KeyError:
+            raise ConfigError(
+                f"signals.{name}: signal {source.signal!r} is not in message {source.message!r} of the DBC"
+            ) from None
+        dbc_unit = signal.unit or ""
+        unit, factor, note = _resolve_unit(name, source, dbc_unit, wheel_radius)
+        mux = tuple(signal.multiplexer_ids) if signal.multiplexer_ids else None
+        resolved.append(
+            ResolvedSignal(name, message.name, signal.name, dbc_unit, unit, factor, source.scale, source.offset,
+                           mux, signal.minimum, signal.maximum, note)
+        )
+    return resolved
+
+
+class _MessagePlan:
+    """Everything needed to decode one input message quickly."""
+
+    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range")
+
+    def __init__(self, message: Any, signals: list[ResolvedSignal], is_trigger: bool) -> None:
+        self.message = message
+        self.name = message.name
+        self.frame_id = message.frame_id
+        self.length = message.length
+        self.signals = signals
+        self.is_trigger = is_trigger
+        # DBC ranges that say something (min < max) mark invalid codes (e.g. 0xFFFF).
+        self.check_range = [
+            (s, s.minimum, s.maximum) for s in signals
+            if s.minimum is not None and s.maximum is not None and s.minimum < s.maximum
+        ]
+
+
+class InputCodec:
+    """Decodes the configured input messages into canonical SI values (and encodes, for the simulator)."""
+
+    def __init__(self, db: Database, signals: Mapping[str, SignalSource], wheel_radius: float) -> None:
+        self.db = db
+        self.resolved = resolve_signals(db, signals, wheel_radius)
+        by_message: dict[str, list[ResolvedSignal]] = {}
+        for r in self.resolved:
+            by_message.setdefault(r.message, []).append(r)
+        trigger_messages = {r.message for r in self.resolved if r.name.startswith("wheel_speed")}
+        if len(trigger_messages) != 1:
+            raise ConfigError(
+                "signals: the four wheel speeds must come from one message (it triggers each update); "
+                f"they come from {', '.join(sorted(trigger_messages))}"
+            )
+        self.trigger_message = trigger_messages.pop()
+        self._plans: dict[int, _MessagePlan] = {}
+        for name, sigs in by_message.items():
+            message = db.get_message_by_name(name)
+            if message.is_extended_frame:
+                raise ConfigError(f"signals: message {name!r} uses an extended (29-bit) ID; only 11-bit inputs are supported")
+            if message.frame_id in self._plans:
+                raise ConfigError(f"signals: two mapped messages share frame ID 0x{message.frame_id:X}")
+            self._plans[message.frame_id] = _MessagePlan(message, sigs, name == self.trigger_message)
+        self.input_ids: frozenset[int] = frozenset(self._plans)
+        self.trigger_id = next(p.frame_id for p in self._plans.values() if p.is_trigger)
+        self.counter_jumps = 0
+        self._counter_signals = {
+            fid: next((s for s in p.message.signals if s.name.lower() in ("counter", "alive_counter", "msgcounter")
+                       or s.name.lower().endswith("_counter") or s.name.lower().endswith("alivecounter")), None)
+            for fid, p in self._plans.items()
+        }
+        self._last_counter: dict[int, int] = {}
+
+    def input_messages(self) -> list[InputMessage]:
+        out = []
+        for plan in self._plans.values():
+            cycle = plan.message.cycle_time
+            out.append(
+                InputMessage(plan.name, plan.frame_id, cycle / 1000.0 if cycle else None,
+                             tuple(s.name for s in plan.signals), plan.length, plan.message.is_multiplexed())
+            )
+        return out
+
+    def decode(self, frame: Frame) -> DecodedInput | None:
+        """Canonical values of an input frame; None for frames that are not inputs.
+
+        Raises `DecodeFailure` for input frames that cannot be trusted (wrong length, a mapped
+        signal outside its DBC range or not finite).
+        """
+        plan = self._plans.get(frame.can_id)
+        if plan is None or frame.is_extended:
+            return None
+        data = frame.data
+        if len(data) != plan.length:
+            raise DecodeFailure("wrong length", f"{plan.name} has {len(data)} bytes, DBC says {plan.length}")
+        try:
+            raw = plan.message.decode(data, decode_choices=False, scaling=True)
+        except Exception as exc:  # bad multiplexer value, truncated, ...
+            raise DecodeFailure("undecodable", f"{plan.name}: {exc}") from None
+        for s, low, high in plan.check_range:
+            value = raw.get(s.signal)
+            if value is not None and not (low - 1e-9 * abs(low) - 1e-9 <= value <= high + 1e-9 * abs(high) + 1e-9):
+                raise DecodeFailure("out of range", f"{plan.name}.{s.signal} = {value}")
+        values = {}
+        for s in plan.signals:
+            physical = raw.get(s.signal)
+            if physical is None:
+                continue  # another multiplexer page
+            v = s.to_si(float(physical))
+            if not math.isfinite(v):
+                raise DecodeFailure("not finite", f"{plan.name}.{s.signal}")
+            values[s.name] = v
+        self._check_counter(frame.can_id, raw)
+        return DecodedInput(frame.time_s, plan.name, values, plan.is_trigger)
+
+    def _check_counter(self, frame_id: int, raw: Mapping[str, Any]) -> None:
+        signal = self._counter_signals.get(frame_id)
+        if signal is None:
+            return
+        value = raw.get(signal.name)
+        if value is None:
+            return
+        counter = int(value)
+        last = self._last_counter.get(frame_id)
+        self._last_counter[frame_id] = counter
+        modulo = 1 << signal.length
+        if last is not None and (counter - last) % modulo not in (1,):
+            self.counter_jumps += 1
+
+    def encode_input(self, message: str, values: Mapping[str, float]) -> list[bytes]:
+        """Payloads carrying the given canonical values (several for a multiplexed message)."""
+        plan = next(p for p in self._plans.values() if p.name == message)
+        msg = plan.message
+        pages: dict[int | None, dict[str, float]] = {}
+        for s in plan.signals:
+            if s.name not in values:
+                continue
+            keys = s.multiplexer_ids or (None,)
+            pages.setdefault(keys[0], {})[s.signal] = s.from_si(values[s.name])
+        payloads = []
+        for mux_id, page in pages.items():
+            full = {}
+            for sig in msg.signals:
+                if sig.is_multiplexer:
+                    full[sig.name] = mux_id if mux_id is not None else 0
+                elif sig.multiplexer_ids and mux_id not in sig.multiplexer_ids:
+                    continue
+                else:
+                    full[sig.name] = page.get(sig.name, _idle_value(sig))
+            for sig in msg.signals:
+                if sig.name in full and sig.name in page:
+                    full[sig.name] = _clip(sig, full[sig.name])
+            payloads.append(bytes(msg.encode(full, scaling=True, strict=False, padding=False)))
+        return payloads
+
+
+def _idle_value(signal: Any) -> float:
+    """A value for DBC signals we do not map (counters, checksums, other ECUs' data)."""
+    low = signal.minimum if signal.minimum is not None else None
+    if low is not None and low > 0:
+        return low
+    return 0.0 if signal.offset <= 0 <= (signal.maximum if signal.maximum is not None else math.inf) else signal.offset
+
+
+def _clip(signal: Any, value: float) -> float:
+    """Keep a value within what the signal's bits (and DBC range) can carry."""
+    bits = signal.length
+    if signal.is_signed:
+        raw_low, raw_high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    else:
+        raw_low, raw_high = 0, (1 << bits) - 1
+    lo = raw_low * signal.scale + signal.offset
+    hi = raw_high * signal.scale + signal.offset
+    if signal.scale < 0:
+        lo, hi = hi, lo
+    if signal.minimum is not None and signal.maximum is not None and signal.minimum < signal.maximum:
+        lo, hi = max(lo, signal.minimum), min(hi, signal.maximum)
+    if not math.isfinite(value):
+        return lo
+    return min(max(value, lo), hi)
+
+
+# -------------------------------------------------------------------------------- outputs
+class OutputCodec:
+    """FRICTION_ESTIMATE / FRICTION_WHEEL encoding with the E2E counter and CRC; decoding for tools."""
+
+    def __init__(self, db: Database) -> None:
+        try:
+            self.estimate_message = db.get_message_by_name(ESTIMATE_MESSAGE)
+            self.wheel_message = db.get_message_by_name(WHEEL_MESSAGE)
+        except KeyError as exc:
+            raise ConfigError(f"can.output_dbc: lacks message {exc.args[0]!r}") from None
+        for message, names in (
+            (self.estimate_message, ("Crc", "Counter", "EstimatorStatus", "MuMax", "SlipAtMuMax", "Theta", "Confidence")),
+            (self.wheel_message, ("Crc", "Counter", "WheelIndex", "Slip", "MuUsed", "MuMaxWheel", "NormalForce")),
+        ):
+            present = {s.name for s in message.signals}
+            missing = [n for n in names if n not in present]
+            if missing:
+                raise ConfigError(f"can.output_dbc: {message.name} lacks signal(s) {', '.join(missing)}")
+        self.estimate_id: int = self.estimate_message.frame_id
+        self.wheel_id: int = self.wheel_message.frame_id
+        self._signals = {m.frame_id: {s.name: s for s in m.signals} for m in (self.estimate_message, self.wheel_message)}
+        self._counters = {self.estimate_id: 0, self.wheel_id: 0}
+        self._counter_bit = {
+            fid: sigs["Counter"].start for fid, sigs in self._signals.items()
+        }
+        self.e2e = E2EChecker()
+
+    def _encode(self, frame_id: int, message: Any, values: dict[str, float]) -> bytes:
+        sigs = self._signals[frame_id]
+        clipped = {k: _clip(sigs[k], v) for k, v in values.items()}
+        payload = bytearray(message.encode(clipped, scaling=True, strict=False, padding=False))
+        counter = self._counters[frame_id]
+        self._counters[frame_id] = (counter + 1) & 0x0F
+        return bytes(protect(frame_id, payload, counter, self._counter_bit[frame_id]))
+
+    def encode_estimate(self, estimate: FrictionEstimate) -> bytes:
+        status = int(estimate.status)
+        numbers = (estimate.mu_max, estimate.slip_at_mu_max, estimate.theta, estimate.confidence)
+        if not all(math.isfinite(x) for x in numbers):
+            # Never put NaN/inf on the bus; say FAULT instead of a number nobody can trust.
+            status = int(Status.FAULT)
+            numbers = tuple(x if math.isfinite(x) else 0.0 for x in numbers)
+        mu, slip, theta, confidence = numbers
+        return self._encode(self.estimate_id, self.estimate_message, {
+            "Crc": 0, "Counter": 0, "EstimatorStatus": status, "MuMax": mu, "SlipAtMuMax": slip,
+            "Theta": theta, "Confidence": confidence,
+        })
+
+    def encode_wheels(self, estimate: FrictionEstimate, sample: PhysicalSample) -> list[bytes]:
+        payloads = []
+        for i in range(len(WHEELS)):
+            payloads.append(self._encode(self.wheel_id, self.wheel_message, {
+                "Crc": 0, "Counter": 0, "WheelIndex": i,
+                "Slip": _finite(sample.slip[i]), "MuUsed": _finite(sample.mu_used[i]),
+                "MuMaxWheel": _finite(estimate.wheel_mu_max[i]), "NormalForce": _finite(sample.normal_force_n[i]),
+            }))
+        return payloads
+
+    def decode_output(self, frame: Frame) -> dict[str, Any] | None:
+        """Signals of an output frame by name, plus 'message', 'time_s' and the E2E verdict 'e2e'."""
+        if frame.can_id == self.estimate_id:
+            message = self.estimate_message
+        elif frame.can_id == self.wheel_id:
+            message = self.wheel_message
+        else:
+            return None
+        if len(frame.data) != message.length:
+            self.e2e.crc_failures += 1
+            return {"message": message.name, "time_s": frame.time_s, "e2e": "length"}
+        verdict = self.e2e.check(frame.can_id, bytes(frame.data), self._counter_bit[frame.can_id])
+        try:
+            values = dict(message.decode(frame.data, decode_choices=True, scaling=True))
+        except Exception:
+            return {"message": message.name, "time_s": frame.time_s, "e2e": "undecodable"}
+        for key, value in values.items():
+            if not isinstance(value, (int, float)):
+                values[key] = str(value)
+        values.update(message=message.name, time_s=frame.time_s, e2e=verdict)
+        return values
+
+
+def _finite(x: float) -> float:
+    return x if math.isfinite(x) else 0.0
+
+
+def output_codec_for(paths: Iterable[Path | str]) -> OutputCodec:
+    return OutputCodec(load_databases(list(paths), strict=True))
+
+
+def validate_against_dbc(config: Any) -> tuple[InputCodec, OutputCodec]:
+    """Build both codecs once: every mapped signal exists, units resolve, outputs are present."""
+    input_codec = InputCodec(load_databases(config.can.dbc, strict=config.can.dbc_strict), config.signals,
+                             config.vehicle.wheel_radius)
+    output_codec = OutputCodec(load_databases([config.can.output_dbc], strict=True))
+    overlap = input_codec.input_ids & {output_codec.estimate_id, output_codec.wheel_id}
+    if overlap:
+        raise ConfigError(f"signals: input message ID 0x{min(overlap):X} collides with frictiond's output frames")
+    return input_codec, output_codec

@@ -1,0 +1,407 @@
+"""Recursive trust-region fit of the static LuGre model (paper §3): the friction estimator.
+
+Design (the choices model.md leaves open, and why):
+
+- Identified: one road parameter θ per wheel (split-μ must show per wheel), and, pooled over the
+  wheels, the bristle stiffness σ0 (slip stiffness σ0·L/2), the Stribeck speed v_s (how the peak
+  moves with sliding speed) and the viscous σ2 (the shape beyond the peak). Fitting static LuGre
+  to Burckhardt and Magic Formula curves on every surface, these four reproduce the peak within
+  ~1 %; without σ2 and v_s the error reaches 20–100 % on low-μ surfaces. μ_c, μ_s, α and L are
+  held at their published values: with θ free they are not separately identifiable (θ and the
+  g-scale multiply), and with σ0 free L is redundant.
+- Priors: every free parameter is regularised toward a prior (nominal values, or the state
+  saved from the last run), so unexcited directions stay put instead of wandering. The θ of the
+  front and rear wheel on one side are tied by a soft constraint (they roll on the same track);
+  left and right only weakly (split-μ).
+- Window: samples older than `window_s` are dropped, the rest weighted by exp(−age/τ). A change
+  detector watches the newest residuals: when they agree on a sign well beyond the noise (a μ
+  jump), older samples are dropped at once, so the fit re-converges in a fraction of a second.
+- Each update adds the wheels' new samples and runs at most `max_iterations` trust-region
+  iterations warm-started from the last solution and trust radius (`trust_region.solve`).
+- Honesty: the peak is only identifiable once the slip has been near it. An excitation measure
+  (how close the window's slips came to λ*, and how much of μ_max was used) gates the status,
+  and the confidence comes from the Gauss–Newton covariance σ²(JᵀWJ)⁻¹ pushed onto μ_max by the
+  delta method, with σ² from the residuals (model mismatch counts as noise).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from . import trust_region
+from .samples import FrictionEstimate, PhysicalSample, Status
+from .tyre_model import LugreParams, mu_and_jacobian_theta, peaks
+from .vehicle import VehicleParams
+
+SHARED = ("sigma0", "v_s", "sigma2")
+N_WHEELS = 4
+
+
+@dataclass(frozen=True, slots=True)
+class LugreTROptions:
+    """Tuning of the LuGre trust-region estimator; field names are config keys under estimator.lugre_tr."""
+
+    window_s: float = 0.8                 # samples older than this leave the window
+    forgetting_time_constant: float = 0.4  # s; weight exp(−age/τ)
+    max_iterations: int = 3               # trust-region iterations per update (bounded work)
+    measurement_std: float = 0.04         # assumed std of a utilised-μ sample (sets the prior's weight)
+    # Priors (nominal values; Canudas-de-Wit et al. 2003 except θ) and their standard deviations.
+    prior_theta: float = 1.2
+    prior_sigma0: float = 181.54
+    prior_v_s: float = 6.57
+    prior_sigma2: float = 0.0018
+    prior_std_theta: float = 3.0
+    prior_std_sigma0: float = 120.0
+    prior_std_v_s: float = 5.0
+    prior_std_sigma2: float = 0.004
+    front_rear_coupling: float = 0.08     # relative std of θ_front − θ_rear on one side
+    left_right_coupling: float = 0.6      # relative std of θ_left − θ_right (split-μ allowed)
+    # Bounds of the free parameters.
+    theta_min: float = 0.35
+    theta_max: float = 40.0
+    sigma0_min: float = 20.0
+    sigma0_max: float = 2000.0
+    v_s_min: float = 0.3
+    v_s_max: float = 60.0
+    sigma2_min: float = 0.0
+    sigma2_max: float = 0.03
+    # Held parameters.
+    mu_c: float = 0.8
+    mu_s: float = 1.55
+    alpha: float = 0.5
+    patch_length: float = 0.2
+    # Gating and status.
+    min_slip: float = 0.003               # samples below this carry no information on the peak
+    min_samples: int = 25
+    excitation_slip_ratio: float = 0.75   # slip must have reached this fraction of λ*
+    excitation_mu_ratio: float = 0.85     # ... or the utilised μ this fraction of μ_max
+    valid_confidence: float = 0.5
+    confidence_tolerance: float = 0.06    # relative μ_max std at which confidence = e^(−½)
+    hold_s: float = 2.0                   # VALID is kept this long after the last excited sample
+    jump_threshold: float = 3.5           # change detector: newest mean residual in noise std units
+    jump_window_s: float = 0.08
+
+    def validate(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                if not math.isfinite(value) or value < 0:
+                    raise ValueError(f"{f.name}: must be a finite number ≥ 0, got {value!r}")
+        if self.window_s <= 0 or self.forgetting_time_constant <= 0 or self.measurement_std <= 0:
+            raise ValueError("window_s, forgetting_time_constant and measurement_std must be > 0")
+        if self.max_iterations < 1:
+            raise ValueError("max_iterations: must be ≥ 1")
+        for name in ("theta", "sigma0", "v_s", "sigma2"):
+            low, high = getattr(self, f"{name}_min"), getattr(self, f"{name}_max")
+            prior = getattr(self, f"prior_{name}")
+            if not low <= prior <= high or low >= high:
+                raise ValueError(f"prior_{name}: {prior} must lie within [{name}_min, {name}_max] = [{low}, {high}]")
+            if getattr(self, f"prior_std_{name}") <= 0:
+                raise ValueError(f"prior_std_{name}: must be > 0")
+        if self.theta_min <= 0:
+            raise ValueError("theta_min: must be > 0")
+
+
+class _Window:
+    """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append."""
+
+    def __init__(self, capacity: int = 4096) -> None:
+        self.capacity = capacity
+        self.slip = np.empty(capacity)
+        self.speed = np.empty(capacity)
+        self.mu = np.empty(capacity)
+        self.time = np.empty(capacity)
+        self.wheel = np.empty(capacity, dtype=np.intp)
+        self.start = 0
+        self.end = 0
+
+    def __len__(self) -> int:
+        return self.end - self.start
+
+    def clear(self) -> None:
+        self.start = self.end = 0
+
+    def append(self, slip: float, speed: float, mu: float, time_s: float, wheel: int) -> None:
+        if self.end == self.capacity:
+            n = len(self)
+            for arr in (self.slip, self.speed, self.mu, self.time, self.wheel):
+                arr[:n] = arr[self.start:self.end]
+            self.start, self.end = 0, n
+            if n == self.capacity:  # full: drop the oldest quarter
+                self.drop_before(self.time[self.capacity // 4])
+        k = self.end
+        self.slip[k], self.speed[k], self.mu[k], self.time[k], self.wheel[k] = slip, speed, mu, time_s, wheel
+        self.end += 1
+
+    def drop_before(self, time_s: float) -> None:
+        times = self.time[self.start:self.end]
+        self.start += int(np.searchsorted(times, time_s, side="left"))
+
+    def view(self) -> tuple[np.ndarray, ...]:
+        s = slice(self.start, self.end)
+        return self.slip[s], self.speed[s], self.mu[s], self.time[s], self.wheel[s]
+
+
+class LugreTrustRegionEstimator:
+    """Recursive, bounded trust-region NLLS fit of static LuGre; one `update` per bus cycle."""
+
+    kind = "lugre-tr"
+
+    def __init__(self, options: LugreTROptions | None = None, vehicle: VehicleParams | None = None) -> None:
+        self.options = options or LugreTROptions()
+        self.options.validate()
+        self.vehicle = vehicle or VehicleParams()
+        o = self.options
+        self._scale = np.array([1.0] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, max(o.prior_sigma2, 1e-3)])
+        self._lb = np.array([o.theta_min] * N_WHEELS + [o.sigma0_min, o.v_s_min, o.sigma2_min]) / self._scale
+        self._ub = np.array([o.theta_max] * N_WHEELS + [o.sigma0_max, o.v_s_max, o.sigma2_max]) / self._scale
+        self._prior_std = np.array([o.prior_std_theta] * N_WHEELS + [o.prior_std_sigma0, o.prior_std_v_s,
+                                                                     o.prior_std_sigma2]) / self._scale
+        self._base = LugreParams(mu_c=o.mu_c, mu_s=o.mu_s, alpha=o.alpha, patch_length=o.patch_length)
+        self._saved_prior: np.ndarray | None = None
+        self.reset()
+
+    # ------------------------------------------------------------------------------ state
+    def reset(self) -> None:
+        o = self.options
+        nominal = np.array([o.prior_theta] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, o.prior_sigma2]) / self._scale
+        self._prior = self._saved_prior.copy() if self._saved_prior is not None else nominal
+        self._x = self._prior.copy()
+        self._radius: float | None = None
+        self._window = _Window()
+        self._last_valid: FrictionEstimate | None = None
+        self._last_excited_s = -math.inf
+        self._last_estimate: FrictionEstimate | None = None
+        self._fits = 0
+        self._jumps = 0
+        self._cov: np.ndarray | None = None
+
+    def state(self) -> dict[str, Any]:
+        """JSON-serialisable: fitted parameters and the last valid estimate (a prior for a restart)."""
+        params = (self._x * self._scale).tolist()
+        last = self._last_valid
+        return {
+            "kind": self.kind,
+            "parameters": dict(zip([f"theta_{w}" for w in ("fl", "fr", "rl", "rr")] + list(SHARED), params)),
+            "last_valid": None if last is None else {
+                "mu_max": last.mu_max, "slip_at_mu_max": last.slip_at_mu_max, "theta": last.theta,
+                "wheel_mu_max": list(last.wheel_mu_max), "time_s": last.time_s,
+            },
+        }
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Use saved parameters as the prior and starting point; `ValueError` on bad content."""
+        if not isinstance(state, dict) or state.get("kind") != self.kind:
+            raise ValueError("state is not from the lugre-tr estimator")
+        params = state.get("parameters")
+        names = [f"theta_{w}" for w in ("fl", "fr", "rl", "rr")] + list(SHARED)
+        if not isinstance(params, dict) or any(n not in params for n in names):
+            raise ValueError("state lacks fitted parameters")
+        values = []
+        for n in names:
+            v = params[n]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"state parameter {n} is not a finite number")
+            values.append(float(v))
+        x = np.clip(np.array(values) / self._scale, self._lb, self._ub)
+        self._saved_prior = x
+        self.reset()
+
+    # ----------------------------------------------------------------------------- update
+    def update(self, sample: PhysicalSample) -> FrictionEstimate:
+        o = self.options
+        t = sample.time_s
+        window = self._window
+        added = 0
+        v = sample.speed_mps
+        for i in range(N_WHEELS):
+            slip = sample.slip[i]
+            if sample.usable[i] and slip >= o.min_slip and math.isfinite(sample.mu_used[i]):
+                window.append(slip, v, sample.mu_used[i], t, i)
+                added += 1
+        window.drop_before(t - o.window_s)
+        if added and len(window) >= o.min_samples:
+            self._detect_jump(t)
+            estimate = self._fit(t, v)
+        else:
+            estimate = self._hold(t, v)
+        self._last_estimate = estimate
+        return estimate
+
+    def _residuals(self, x: np.ndarray, slip, speed, mu_meas, weights, wheel) -> tuple[np.ndarray, np.ndarray]:
+        o = self.options
+        p = self._params(x)
+        theta = (x[:N_WHEELS] * self._scale[:N_WHEELS])[wheel]
+        model, jac = mu_and_jacobian_theta(slip, speed, theta, p, ("theta",) + SHARED)
+        sw = np.sqrt(weights) / o.measurement_std
+        r_data = sw * (model - mu_meas)
+        m = len(slip)
+        J = np.zeros((m, N_WHEELS + len(SHARED)))
+        J[np.arange(m), wheel] = jac[:, 0] * sw * self._scale[0]
+        J[:, N_WHEELS:] = jac[:, 1:] * sw[:, None] * self._scale[N_WHEELS:]
+        # Priors and the soft ties between wheels.
+        r_prior = (x - self._prior) / self._prior_std
+        J_prior = np.diag(1.0 / self._prior_std)
+        th = x[:N_WHEELS]
+        mean_th = max(float(np.mean(th)), 1e-6)
+        ties = ((0, 2, o.front_rear_coupling), (1, 3, o.front_rear_coupling),
+                (0, 1, o.left_right_coupling), (2, 3, o.left_right_coupling))
+        r_tie = np.empty(len(ties))
+        J_tie = np.zeros((len(ties), len(x)))
+        for k, (a, b, rel) in enumerate(ties):
+            s = rel * mean_th
+            r_tie[k] = (th[a] - th[b]) / s
+            J_tie[k, a] = 1.0 / s
+            J_tie[k, b] = -1.0 / s
+        return np.concatenate([r_data, r_prior, r_tie]), np.vstack([J, J_prior, J_tie])
+
+    def _params(self, x: np.ndarray) -> LugreParams:
+        sigma0, v_s, sigma2 = x[N_WHEELS:] * self._scale[N_WHEELS:]
+        return LugreParams(theta=1.0, sigma0=float(sigma0), sigma2=float(sigma2), mu_c=self._base.mu_c,
+                           mu_s=self._base.mu_s, v_s=float(v_s), alpha=self._base.alpha,
+                           patch_length=self._base.patch_length)
+
+    def _weights(self, now_s: float, times: np.ndarray) -> np.ndarray:
+        return np.exp((times - now_s) / self.options.forgetting_time_constant)
+
+    def _detect_jump(self, now_s: float) -> None:
+        """Drop the window's older samples when the newest ones disagree with the fit (a μ jump)."""
+        o = self.options
+        slip, speed, mu_meas, times, wheel = self._window.view()
+        recent = times >= now_s - o.jump_window_s
+        n_recent = int(np.count_nonzero(recent))
+        if n_recent < 8 or self._fits < 5 or len(times) - n_recent < 2 * n_recent:
+            return
+        theta = (self._x[:N_WHEELS] * self._scale[:N_WHEELS])[wheel[recent]]
+        model, _ = mu_and_jacobian_theta(slip[recent], speed[recent], theta, self._params(self._x), ("theta",))
+        resid = mu_meas[recent] - model
+        noise = max(o.measurement_std, float(np.std(resid)))
+        score = abs(float(np.mean(resid))) / (noise / math.sqrt(n_recent))
+        same_sign = abs(float(np.mean(np.sign(resid))))
+        if score > o.jump_threshold * 2.0 and same_sign > 0.7:
+            self._window.drop_before(now_s - o.jump_window_s - 1e-9)
+            # Let θ move again: restart from the prior's θ spread, keep the shape parameters.
+            self._radius = None
+            self._jumps += 1
+
+    def _fit(self, now_s: float, speed: float) -> FrictionEstimate:
+        o = self.options
+        slip, speeds, mu_meas, times, wheel = self._window.view()
+        weights = self._weights(now_s, times)
+
+        def fun(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return self._residuals(x, slip, speeds, mu_meas, weights, wheel)
+
+        result = trust_region.solve(fun, self._x, self._lb, self._ub, radius=self._radius,
+                                    max_iterations=o.max_iterations, ftol=1e-6, xtol=1e-6, gtol=1e-8)
+        self._x = result.x
+        self._radius = max(result.radius, 1e-3)
+        self._fits += 1
+        return self._report(now_s, speed, result.residuals[: len(slip)], result.jacobian, weights, slip, mu_meas,
+                            speeds, wheel)
+
+    def _report(self, now_s: float, speed: float, r_data: np.ndarray, J: np.ndarray, weights: np.ndarray,
+                slip: np.ndarray, mu_meas: np.ndarray, speeds: np.ndarray, wheel: np.ndarray) -> FrictionEstimate:
+        o = self.options
+        x = self._x
+        p = self._params(x)
+        thetas = x[:N_WHEELS] * self._scale[:N_WHEELS]
+        v_eval = max(speed, 1.0)
+        wheel_mu, wheel_lam = peaks(v_eval, p, thetas)
+        # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
+        _, jac = mu_and_jacobian_theta(wheel_lam, np.full(N_WHEELS, v_eval), thetas, p, ("theta",) + SHARED)
+        G = np.zeros((N_WHEELS, len(x)))
+        G[np.arange(N_WHEELS), np.arange(N_WHEELS)] = jac[:, 0] * self._scale[0]
+        G[:, N_WHEELS:] = jac[:, 1:] * self._scale[N_WHEELS:]
+        # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
+        w_sum = float(np.sum(weights))
+        dof = max(w_sum - len(x), 1.0)
+        variance_factor = max(1.0, float(r_data @ r_data) / dof)
+        try:
+            cov = np.linalg.inv(J.T @ J) * variance_factor
+        except np.linalg.LinAlgError:
+            cov = np.full((len(x), len(x)), np.inf)
+        self._cov = cov
+        g_mean = G.mean(axis=0)
+        mu_max = float(np.mean(wheel_mu))
+        mu_std = math.sqrt(max(float(g_mean @ cov @ g_mean), 0.0))
+        wheel_std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, cov, G), 0.0))
+        # Excitation: how near the peak the data went, per wheel, from the newest samples.
+        excitation = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam)
+        rel_std = mu_std / max(mu_max, 0.05)
+        confidence = math.exp(-0.5 * (rel_std / o.confidence_tolerance) ** 2) * excitation
+        if not math.isfinite(confidence):
+            confidence = 0.0
+        theta_mean = float(np.mean(thetas))
+        slip_star = float(np.mean(wheel_lam))
+        detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
+                  "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
+                  "jumps": float(self._jumps)}
+        for i, s in enumerate(wheel_std):
+            detail[f"wheel_std_{i}"] = float(s)
+        if excitation > 0 and confidence >= o.valid_confidence:
+            status = Status.VALID
+            self._last_excited_s = now_s
+        elif excitation > 0:
+            status = Status.CONVERGING
+        else:
+            return self._hold(now_s, speed, fitted=(mu_max, slip_star, theta_mean, tuple(map(float, wheel_mu))))
+        estimate = FrictionEstimate(now_s, status, mu_max, slip_star, theta_mean, confidence,
+                                    tuple(float(m) for m in wheel_mu), mu_std, detail)
+        if status == Status.VALID:
+            self._last_valid = estimate
+        return estimate
+
+    def _excitation(self, slip, mu_meas, wheel, weights, wheel_mu, wheel_lam) -> float:
+        """0 when the recent window never came near the peak; rises to 1 once it has."""
+        o = self.options
+        recent = weights > math.exp(-1.5)
+        n = int(np.count_nonzero(recent))
+        if n < 5:
+            return 0.0
+        w = wheel[recent]
+        slip_ratio = slip[recent] / wheel_lam[w]
+        mu_ratio = mu_meas[recent] / wheel_mu[w] * (o.excitation_slip_ratio / o.excitation_mu_ratio)
+        ratio = np.maximum(slip_ratio, mu_ratio)
+        # A high quantile, not the max: a few noisy samples must not count as excitation.
+        k = max(0, n - 1 - max(2, n // 10))
+        best = float(np.partition(ratio, k)[k])
+        if best < o.excitation_slip_ratio:
+            return 0.0
+        return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
+
+    def _hold(self, now_s: float, speed: float, fitted: tuple | None = None) -> FrictionEstimate:
+        """No fresh excitation: keep a recent VALID for `hold_s`, then say NOT_EXCITED."""
+        o = self.options
+        last = self._last_valid
+        if last is not None and now_s - self._last_excited_s <= o.hold_s:
+            return FrictionEstimate(now_s, Status.VALID, last.mu_max, last.slip_at_mu_max, last.theta,
+                                    last.confidence, last.wheel_mu_max, last.mu_max_std, dict(last.detail))
+        if last is not None:
+            return FrictionEstimate(now_s, Status.NOT_EXCITED, last.mu_max, last.slip_at_mu_max, last.theta, 0.0,
+                                    last.wheel_mu_max, math.inf)
+        if fitted is not None:
+            mu_max, slip_star, theta, wheel_mu = fitted
+        else:
+            p = self._params(self._x)
+            thetas = self._x[:N_WHEELS] * self._scale[:N_WHEELS]
+            wm, wl = peaks(max(speed, 1.0), p, thetas)
+            mu_max, slip_star, theta, wheel_mu = float(np.mean(wm)), float(np.mean(wl)), float(np.mean(thetas)), tuple(map(float, wm))
+        return FrictionEstimate(now_s, Status.NOT_EXCITED, mu_max, slip_star, theta, 0.0, wheel_mu, math.inf)
+
+    # ------------------------------------------------------------------------------ tools
+    def mu_curve(self, slip: np.ndarray, speed_mps: float, wheel: int | None = None) -> np.ndarray:
+        """The fitted μ(λ) at a speed (for plots): one wheel's θ, or the wheels' mean."""
+        p = self._params(self._x)
+        thetas = self._x[:N_WHEELS] * self._scale[:N_WHEELS]
+        theta = float(np.mean(thetas)) if wheel is None else float(thetas[wheel])
+        slip = np.asarray(slip, dtype=float)
+        value, _ = mu_and_jacobian_theta(slip, np.full_like(slip, speed_mps), np.full_like(slip, theta), p, ("theta",))
+        return value
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        return self.state()["parameters"]

@@ -1,0 +1,208 @@
+"""Static (steady-state, distributed) LuGre tyre model: μ(λ, v; p), its Jacobian and its peak.
+
+With braking-positive slip λ, vehicle speed v, sliding speed u = λ v (model.md):
+
+    g(u)    = μ_c + (μ_s − μ_c) exp(−(u / v_s)^α)
+    Z(λ, v) = θ σ0 L λ / (g(u) (1 − λ))
+    μ(λ, v) = (g(u) / θ) · F(Z) + σ2 λ v,      F(Z) = 1 − (1 − e^(−Z)) / Z
+
+Traction (λ < 0) is the odd extension. All functions are vectorised over samples; the parameter
+vector is a `LugreParams`. Pure numpy, nothing of CAN.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+# Slip is kept away from 1 (locked wheel: Z → ∞) so every formula stays finite.
+MAX_MODEL_SLIP = 0.98
+# Below this Z the closed form of F loses digits to cancellation; use the series instead.
+_SMALL_Z = 1e-4
+
+PARAMETER_NAMES = ("theta", "sigma0", "sigma2", "mu_c", "mu_s", "v_s", "alpha", "patch_length")
+
+
+@dataclass(frozen=True, slots=True)
+class LugreParams:
+    """Static LuGre parameters; defaults are Canudas-de-Wit et al. 2003 (α = ½, L = 0.2 m)."""
+
+    theta: float = 1.0          # road condition: 1 dry, larger is more slippery (peak ~ 1/θ)
+    sigma0: float = 181.54      # bristle stiffness [1/m]
+    sigma2: float = 0.0018      # viscous friction [s/m]
+    mu_c: float = 0.8           # Coulomb level
+    mu_s: float = 1.55          # static level
+    v_s: float = 6.57           # Stribeck speed [m/s]
+    alpha: float = 0.5          # Stribeck exponent
+    patch_length: float = 0.2   # contact patch length L [m]
+
+    def with_values(self, **values: float) -> "LugreParams":
+        return replace(self, **values)
+
+    def as_dict(self) -> dict[str, float]:
+        return {f.name: float(getattr(self, f.name)) for f in fields(self)}
+
+
+def _F_and_dF(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """F(Z) = 1 − (1 − e^−Z)/Z and F'(Z), accurate for small Z."""
+    small = Z < _SMALL_Z
+    Zs = np.where(small, 1.0, Z)
+    em = np.exp(-Zs)
+    one_minus = -np.expm1(-Zs)
+    F = 1.0 - one_minus / Zs
+    dF = (one_minus - Zs * em) / (Zs * Zs)
+    if small.any():
+        F = np.where(small, Z / 2.0 - Z * Z / 6.0, F)
+        dF = np.where(small, 0.5 - Z / 3.0, dF)
+    return F, dF
+
+
+def _stribeck(u: np.ndarray, p: LugreParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """g(u), e = exp(−(u/v_s)^α) and (u/v_s)^α."""
+    ratio = (np.maximum(u, 0.0) / p.v_s) ** p.alpha
+    e = np.exp(-ratio)
+    return p.mu_c + (p.mu_s - p.mu_c) * e, e, ratio
+
+
+def mu(slip, speed_mps, p: LugreParams) -> np.ndarray:
+    """Utilised friction in steady state for braking-positive slip (odd in slip)."""
+    slip = np.asarray(slip, dtype=float)
+    sign = np.sign(slip)
+    lam = np.minimum(np.abs(slip), MAX_MODEL_SLIP)
+    v = np.asarray(speed_mps, dtype=float)
+    g, _, _ = _stribeck(lam * v, p)
+    Z = p.theta * p.sigma0 * p.patch_length * lam / (g * (1.0 - lam))
+    F, _ = _F_and_dF(Z)
+    return sign * ((g / p.theta) * F + p.sigma2 * lam * v)
+
+
+def mu_and_jacobian(slip, speed_mps, p: LugreParams, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """μ at the samples and ∂μ/∂p for the named parameters (columns in the order of `names`)."""
+    slip = np.asarray(slip, dtype=float)
+    sign = np.sign(slip)
+    lam = np.minimum(np.abs(slip), MAX_MODEL_SLIP)
+    v = np.asarray(speed_mps, dtype=float)
+    u = lam * v
+    g, e, ratio = _stribeck(u, p)
+    theta = p.theta
+    k = p.sigma0 * p.patch_length
+    Z = theta * k * lam / (g * (1.0 - lam))
+    F, dF = _F_and_dF(Z)
+    value = sign * ((g / theta) * F + p.sigma2 * lam * v)
+    dmu_dg = (F - Z * dF) / theta
+    columns = []
+    for name in names:
+        if name == "theta":
+            col = (g / (theta * theta)) * (Z * dF - F)
+        elif name == "sigma0":
+            col = (g / theta) * dF * Z / p.sigma0
+        elif name == "patch_length":
+            col = (g / theta) * dF * Z / p.patch_length
+        elif name == "sigma2":
+            col = lam * v
+        elif name == "mu_c":
+            col = dmu_dg * (1.0 - e)
+        elif name == "mu_s":
+            col = dmu_dg * e
+        elif name == "v_s":
+            col = dmu_dg * (p.mu_s - p.mu_c) * e * p.alpha * ratio / p.v_s
+        elif name == "alpha":
+            with np.errstate(divide="ignore", invalid="ignore"):
+                log_ratio = np.where(u > 0, np.log(np.maximum(u, 1e-300) / p.v_s), 0.0)
+            col = dmu_dg * (p.mu_s - p.mu_c) * e * (-ratio * log_ratio)
+        else:
+            raise ValueError(f"unknown LuGre parameter {name!r}")
+        columns.append(sign * col)
+    jac = np.stack(columns, axis=-1) if columns else np.zeros(value.shape + (0,))
+    return value, jac
+
+
+def mu_and_jacobian_theta(slip, speed_mps, theta, p: LugreParams, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """As `mu_and_jacobian`, with θ given per sample (pooled fits with one θ per wheel)."""
+    slip = np.asarray(slip, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    sign = np.sign(slip)
+    lam = np.minimum(np.abs(slip), MAX_MODEL_SLIP)
+    v = np.asarray(speed_mps, dtype=float)
+    u = lam * v
+    g, e, ratio = _stribeck(u, p)
+    k = p.sigma0 * p.patch_length
+    Z = theta * k * lam / (g * (1.0 - lam))
+    F, dF = _F_and_dF(Z)
+    g_over_theta = g / theta
+    value = sign * (g_over_theta * F + p.sigma2 * lam * v)
+    dmu_dg = (F - Z * dF) / theta
+    columns = []
+    for name in names:
+        if name == "theta":
+            col = (g_over_theta / theta) * (Z * dF - F)
+        elif name == "sigma0":
+            col = g_over_theta * dF * Z / p.sigma0
+        elif name == "sigma2":
+            col = lam * v
+        elif name == "v_s":
+            col = dmu_dg * (p.mu_s - p.mu_c) * e * p.alpha * ratio / p.v_s
+        elif name == "mu_s":
+            col = dmu_dg * e
+        elif name == "mu_c":
+            col = dmu_dg * (1.0 - e)
+        else:
+            raise ValueError(f"parameter {name!r} is not supported in per-sample θ fits")
+        columns.append(sign * col)
+    return value, np.stack(columns, axis=-1)
+
+
+# Peak search: a fixed slip grid, then a fine grid around the best point and a parabola
+# through the three best fine points. Vectorised over several θ (one per wheel).
+_PEAK_GRID = np.concatenate([np.geomspace(1e-3, 0.05, 40), np.linspace(0.05, MAX_MODEL_SLIP, 120)[1:]])
+_FINE = np.linspace(-1.0, 1.0, 41)
+
+
+def peaks(speed_mps: float, p: LugreParams, thetas) -> tuple[np.ndarray, np.ndarray]:
+    """(μ_max, λ*) at one vehicle speed for each θ in `thetas` (other parameters from `p`)."""
+    thetas = np.atleast_1d(np.asarray(thetas, dtype=float))[:, None]
+    grid = _PEAK_GRID[None, :]
+    v = float(speed_mps)
+    values = _mu_grid(grid, v, thetas, p)
+    i = np.argmax(values, axis=1)
+    lo = _PEAK_GRID[np.maximum(i - 1, 0)]
+    hi = _PEAK_GRID[np.minimum(i + 1, len(_PEAK_GRID) - 1)]
+    centre = _PEAK_GRID[i]
+    half = np.maximum(centre - lo, hi - centre)[:, None]
+    fine = np.clip(centre[:, None] + half * _FINE[None, :], 1e-4, MAX_MODEL_SLIP)
+    fv = _mu_grid(fine, v, thetas, p)
+    j = np.clip(np.argmax(fv, axis=1), 1, len(_FINE) - 2)
+    rows = np.arange(len(j))
+    y0, y1, y2 = fv[rows, j - 1], fv[rows, j], fv[rows, j + 1]
+    x1 = fine[rows, j]
+    h = fine[rows, j + 1] - x1
+    denom = y0 - 2 * y1 + y2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.where(denom < 0, 0.5 * (y0 - y2) / denom, 0.0)
+    shift = np.clip(shift, -1.0, 1.0)
+    lam_star = np.clip(x1 + shift * h, 1e-4, MAX_MODEL_SLIP)
+    # Evaluate at the refined slip rather than trusting the parabola's height (at the edge of
+    # the slip range the curve is not a parabola).
+    mu_star = _mu_grid(lam_star[:, None], v, thetas, p)[:, 0]
+    return np.maximum(mu_star, y1), lam_star
+
+
+def _mu_grid(lam: np.ndarray, v: float, thetas: np.ndarray, p: LugreParams) -> np.ndarray:
+    g, _, _ = _stribeck(lam * v, p)
+    Z = thetas * p.sigma0 * p.patch_length * lam / (g * (1.0 - lam))
+    F, _ = _F_and_dF(Z)
+    return (g / thetas) * F + p.sigma2 * lam * v
+
+
+def peak(speed_mps: float, p: LugreParams) -> tuple[float, float]:
+    """(μ_max, λ*) at one vehicle speed: the maximum of μ(λ, v) over braking slip."""
+    m, lam = peaks(speed_mps, p, [p.theta])
+    return float(m[0]), float(lam[0])
+
+
+def peak_gradient(speed_mps: float, p: LugreParams, names: tuple[str, ...]) -> tuple[float, float, np.ndarray]:
+    """μ_max, λ* and ∂μ_max/∂p (envelope theorem: ∂μ/∂λ = 0 at the peak)."""
+    mu_max, lam = peak(speed_mps, p)
+    _, jac = mu_and_jacobian(np.array([lam]), np.array([speed_mps]), p, names)
+    return mu_max, lam, jac[0]

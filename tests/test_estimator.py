@@ -1,0 +1,124 @@
+"""Estimators on synthetic samples with known parameters (no CAN, no front end)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from frictiond import tyre_model as tm
+from frictiond.baseline_rls import BurckhardtRLSEstimator, burckhardt_peak
+from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
+from frictiond.samples import PhysicalSample, Status
+
+
+def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=None, speed_floor=4.0):
+    """ABS-like slip cycling around each wheel's own peak; curves[i](slip, v) -> μ, peaks[i](v) -> λ*."""
+    rng = np.random.default_rng(seed)
+    t, v = 0.0, v0
+    while v > speed_floor and (duration is None or t < duration):
+        slips, mus = [], []
+        for i in range(4):
+            mu_fn, lam_fn = curves(t, i)
+            lam = lam_fn(v) * slip_scale * (1.0 + 0.55 * math.sin(2 * math.pi * 3.0 * t + i))
+            slips.append(float(lam))
+            mus.append(float(mu_fn(lam, v)) + float(rng.normal(0, noise)))
+        yield PhysicalSample(t, v, tuple(slips), tuple(mus), (4000.0,) * 4, (0.0,) * 4, (True,) * 4, True)
+        v -= max(0.5, float(np.mean(mus))) * 9.81 * 0.01
+        t += 0.01
+
+
+def lugre_curve(p):
+    return (lambda lam, v: tm.mu(lam, v, p)), (lambda v: tm.peak(v, p)[1])
+
+
+def run(est, samples, truth):
+    errors, statuses = [], []
+    for s in samples:
+        e = est.update(s)
+        statuses.append(e.status)
+        if e.status == Status.VALID and s.time_s > 0.5:
+            errors.append(abs(e.mu_max - truth(s)))
+    return e, np.array(errors), statuses
+
+
+@pytest.mark.parametrize("theta", [1.0, 1.6, 3.5, 8.0])
+def test_recovers_peak_of_its_own_model(theta):
+    p = tm.LugreParams(theta=theta, sigma0=230.0, v_s=5.0, sigma2=0.002)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    last, errors, statuses = run(est, braking(lambda t, i: curve, seed=1), lambda s: tm.peak(s.speed_mps, p)[0])
+    mu_true = tm.peak(5.0, p)[0]
+    assert statuses.count(Status.VALID) > 0.6 * len(statuses)
+    assert np.mean(errors) < 0.03 * mu_true + 0.005
+    # θ trades off against σ2 and v_s (not separately identifiable); the peak is what must match.
+    assert last.mu_max == pytest.approx(mu_true, rel=0.05)
+
+
+def test_low_slip_braking_is_never_valid():
+    # Moderate braking: slips at a fifth of the peak never reveal it, whatever the noise does.
+    p = tm.LugreParams(theta=1.3)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    _, _, statuses = run(est, braking(lambda t, i: curve, slip_scale=0.2, seed=2), lambda s: 0.0)
+    assert Status.VALID not in statuses
+    assert statuses[-1] == Status.NOT_EXCITED
+
+
+def test_split_mu_shows_per_wheel():
+    high, low = tm.LugreParams(theta=1.1), tm.LugreParams(theta=4.0)
+    curves = {0: lugre_curve(high), 2: lugre_curve(high), 1: lugre_curve(low), 3: lugre_curve(low)}
+    est = LugreTrustRegionEstimator()
+    last, _, _ = run(est, braking(lambda t, i: curves[i], seed=3), lambda s: 0.0)
+    left, right = last.wheel_mu_max[0], last.wheel_mu_max[1]
+    v = 5.0
+    assert left == pytest.approx(tm.peak(v, high)[0], rel=0.08)
+    assert right == pytest.approx(tm.peak(v, low)[0], rel=0.12)
+
+
+def test_reconverges_after_a_mu_jump():
+    dry, wet = tm.LugreParams(theta=1.0), tm.LugreParams(theta=1.8)
+    jump_t = 1.5
+    est = LugreTrustRegionEstimator()
+    times = []
+    for s in braking(lambda t, i: lugre_curve(dry if t < jump_t else wet), seed=4, v0=30.0):
+        e = est.update(s)
+        truth = tm.peak(s.speed_mps, dry if s.time_s < jump_t else wet)[0]
+        if s.time_s > jump_t and e.status == Status.VALID:
+            times.append((s.time_s, abs(e.mu_max - truth) / truth))
+    settled = next(t for t, err in times if all(e2 < 0.1 for t2, e2 in times if t <= t2 <= t + 0.3))
+    assert settled - jump_t < 0.5
+    # and no VALID output far off after the jump has been absorbed
+    assert max(err for t, err in times if t > jump_t + 0.5) < 0.1
+
+
+def test_state_round_trip_is_used_as_prior():
+    p = tm.LugreParams(theta=2.5)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    run(est, braking(lambda t, i: curve, seed=5), lambda s: 0.0)
+    state = est.state()
+    fresh = LugreTrustRegionEstimator()
+    fresh.load_state(state)
+    assert fresh.state()["parameters"]["theta_fl"] == pytest.approx(state["parameters"]["theta_fl"])
+    with pytest.raises(ValueError):
+        fresh.load_state({"kind": "lugre-tr", "parameters": {"theta_fl": "x"}})
+    with pytest.raises(ValueError):
+        fresh.load_state({"kind": "other"})
+
+
+def test_options_are_validated():
+    with pytest.raises(ValueError):
+        LugreTrustRegionEstimator(LugreTROptions(prior_theta=100.0))
+    with pytest.raises(ValueError):
+        LugreTrustRegionEstimator(LugreTROptions(max_iterations=0))
+
+
+def test_baseline_recovers_burckhardt_peak():
+    c1, c2, c3 = 0.857, 33.822, 0.347
+    mu_true, lam_true = burckhardt_peak(c1, c2, c3)
+    curve = (lambda lam, v: c1 * (1 - np.exp(-c2 * lam)) - c3 * lam), (lambda v: lam_true)
+    est = BurckhardtRLSEstimator()
+    last, errors, statuses = run(est, braking(lambda t, i: curve, seed=6), lambda s: mu_true)
+    assert statuses.count(Status.VALID) > 0.6 * len(statuses)
+    assert np.mean(errors) < 0.05

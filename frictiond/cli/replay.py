@@ -20,6 +20,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--output", "-o", metavar="OUTPUT", help="output log file (format by suffix)")
     parser.add_argument("--truth", metavar="CSV", help="simulator truth CSV (for --plot and the summary)")
     parser.add_argument("--plot", metavar="FILE", help="draw the replay to FILE (.png/.svg/.pdf); needs frictiond[plot]")
+    parser.add_argument("--plot-size", metavar="WxH", default=None,
+                        help="pixel size of the --plot image (default 1200x800; for .svg/.pdf at 100 dpi)")
     parser.add_argument("--quiet", "-q", action="store_true", help="no summary")
     parser.set_defaults(func=_do_replay)
 
@@ -37,6 +39,20 @@ def _do_replay(args: argparse.Namespace) -> int:
 
         if not plotting_available():
             return fail("--plot needs matplotlib: pip install 'frictiond[plot]'", EXIT_DATA_ERROR)
+        from ..plot import check_plot_path
+
+        try:
+            check_plot_path(args.plot)
+        except ValueError as exc:
+            return fail(f"--plot: {exc}", 2)
+    plot_pixels = None
+    if args.plot_size:
+        from ..plot import parse_size
+
+        try:
+            plot_pixels = parse_size(args.plot_size)
+        except ValueError as exc:
+            return fail(f"--plot-size: {exc}", 2)
 
     from ..pipeline import Pipeline
 
@@ -62,7 +78,11 @@ def _do_replay(args: argparse.Namespace) -> int:
     if args.plot and recorder is not None:
         from ..plot import plot_replay
 
-        plot_replay(recorder, args.plot, truth_path=args.truth, estimator=pipeline.estimator)
+        try:
+            plot_replay(recorder, args.plot, truth_path=args.truth, estimator=pipeline.estimator,
+                        pixels=plot_pixels or (1200, 800))
+        except (OSError, ValueError) as exc:
+            return fail(f"--plot: cannot write {args.plot}: {exc}", EXIT_DATA_ERROR)
         if not args.quiet:
             print(f"plot written to {args.plot}")
     return 0

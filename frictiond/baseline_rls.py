@@ -32,6 +32,7 @@ class BurckhardtRLSOptions:
     min_slip: float = 0.003
     measurement_std: float = 0.04
     excitation_slip_ratio: float = 0.75
+    excitation_min_slip: float = 0.03       # as the LuGre estimator: no road peaks below this
     valid_confidence: float = 0.5
     confidence_tolerance: float = 0.06
     hold_s: float = 2.0
@@ -165,7 +166,7 @@ class BurckhardtRLSEstimator:
             g1, g2 = 1.0 - math.exp(-c2 * lam), -lam
             var = (g1 * g1 * f.p11 + 2 * g1 * g2 * f.p12 + g2 * g2 * f.p22) * max(f.error, o.measurement_std**2)
             variances.append(var * (1.0 - o.forgetting_factor) * 2.0)
-            if lam > 0 and self._recent_slip[i] >= o.excitation_slip_ratio * lam:
+            if lam > 0 and self._recent_slip[i] >= max(o.excitation_slip_ratio * lam, o.excitation_min_slip):
                 excited = max(excited, min(1.0, self._recent_slip[i] / lam))
         mu_max = sum(wheel_mu) / N_WHEELS
         std = math.sqrt(max(sum(variances), 0.0)) / N_WHEELS

@@ -215,6 +215,7 @@ class InputCodec:
             for fid, p in self._plans.items()
         }
         self._last_counter: dict[int, int] = {}
+        self._encode_counters: dict[int, int] = {}
 
     def input_messages(self) -> list[InputMessage]:
         out = []
@@ -283,6 +284,11 @@ class InputCodec:
             keys = s.multiplexer_ids or (None,)
             pages.setdefault(keys[0], {})[s.signal] = s.from_si(values[s.name])
         payloads = []
+        counter_signal = self._counter_signals.get(plan.frame_id)
+        counter = self._encode_counters.get(plan.frame_id, 0)
+        self._encode_counters[plan.frame_id] = counter + 1
+        if counter_signal is not None:
+            counter %= 1 << counter_signal.length
         for mux_id, page in pages.items():
             full = {}
             for sig in msg.signals:
@@ -290,6 +296,8 @@ class InputCodec:
                     full[sig.name] = mux_id if mux_id is not None else 0
                 elif sig.multiplexer_ids and mux_id not in sig.multiplexer_ids:
                     continue
+                elif counter_signal is not None and sig.name == counter_signal.name:
+                    full[sig.name] = counter
                 else:
                     full[sig.name] = page.get(sig.name, _idle_value(sig))
             for sig in msg.signals:

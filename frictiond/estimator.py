@@ -26,6 +26,7 @@ Design (the choices model.md leaves open, and why):
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -78,11 +79,17 @@ class LugreTROptions:
     min_samples: int = 25
     excitation_slip_ratio: float = 0.75   # slip must have reached this fraction of λ*
     excitation_mu_ratio: float = 0.85     # ... or the utilised μ this fraction of μ_max
+    excitation_min_slip: float = 0.03     # no road peaks below this slip; smaller excursions prove nothing
     valid_confidence: float = 0.5
-    confidence_tolerance: float = 0.06    # relative μ_max std at which confidence = e^(−½)
+    confidence_tolerance: float = 0.06    # relative μ_max uncertainty at which confidence = e^(−½)
+    model_mismatch: float = 0.03          # relative floor of the uncertainty (the road is not LuGre)
+    drift_window_s: float = 0.15
+    settle_s: float = 0.05                # confidence ramps up over the first excited instants
     hold_s: float = 2.0                   # VALID is kept this long after the last excited sample
     jump_threshold: float = 3.5           # change detector: newest mean residual in noise std units
     jump_window_s: float = 0.08
+    axle_balance_time_constant: float = 2.0   # s; 0 disables the front/rear brake-gain balance
+    axle_balance_limit: float = 0.3
 
     def validate(self) -> None:
         for f in fields(self):
@@ -177,6 +184,10 @@ class LugreTrustRegionEstimator:
         self._last_estimate: FrictionEstimate | None = None
         self._fits = 0
         self._jumps = 0
+        self._axle_balance = 0.0
+        self._mu_history: deque[tuple[float, float]] = deque()
+        self._excited_since_s = math.inf
+        self._last_update_s: float | None = None
         self._cov: np.ndarray | None = None
 
     def state(self) -> dict[str, Any]:
@@ -220,7 +231,7 @@ class LugreTrustRegionEstimator:
         for i in range(N_WHEELS):
             slip = sample.slip[i]
             if sample.usable[i] and slip >= o.min_slip and math.isfinite(sample.mu_used[i]):
-                window.append(slip, v, sample.mu_used[i], t, i)
+                window.append(slip, v, sample.mu_used[i] * self._axle_scale(i), t, i)
                 added += 1
         window.drop_before(t - o.window_s)
         if added and len(window) >= o.min_samples:
@@ -320,10 +331,16 @@ class LugreTrustRegionEstimator:
         w_sum = float(np.sum(weights))
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, float(r_data @ r_data) / dof)
+        # Parameters held at a bound are fixed there for the covariance: the unconstrained
+        # Gauss–Newton covariance would count spread into the infeasible side.
+        span = self._ub - self._lb
+        free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
+        cov = np.zeros((len(x), len(x)))
         try:
-            cov = np.linalg.inv(J.T @ J) * variance_factor
+            Jf = J[:, free]
+            cov[np.ix_(free, free)] = np.linalg.inv(Jf.T @ Jf) * variance_factor
         except np.linalg.LinAlgError:
-            cov = np.full((len(x), len(x)), np.inf)
+            cov[:] = np.inf
         self._cov = cov
         g_mean = G.mean(axis=0)
         mu_max = float(np.mean(wheel_mu))
@@ -331,10 +348,7 @@ class LugreTrustRegionEstimator:
         wheel_std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, cov, G), 0.0))
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         excitation = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam)
-        rel_std = mu_std / max(mu_max, 0.05)
-        confidence = math.exp(-0.5 * (rel_std / o.confidence_tolerance) ** 2) * excitation
-        if not math.isfinite(confidence):
-            confidence = 0.0
+        confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = float(np.mean(thetas))
         slip_star = float(np.mean(wheel_lam))
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
@@ -342,6 +356,8 @@ class LugreTrustRegionEstimator:
                   "jumps": float(self._jumps)}
         for i, s in enumerate(wheel_std):
             detail[f"wheel_std_{i}"] = float(s)
+        if excitation > 0:
+            self._balance_axles(now_s, wheel_mu, weights, wheel)
         if excitation > 0 and confidence >= o.valid_confidence:
             status = Status.VALID
             self._last_excited_s = now_s
@@ -355,20 +371,110 @@ class LugreTrustRegionEstimator:
             self._last_valid = estimate
         return estimate
 
+    def _confidence(self, now_s: float, mu_max: float, mu_std: float, excitation: float) -> float:
+        """0…1: how much to trust μ_max now.
+
+        The Gauss–Newton covariance alone measures noise, not model mismatch, and measured
+        against the simulator's truths it hardly predicts the error. Combined here: the delta-method
+        spread (half weight), the drift of μ_max over the last `drift_window_s` (an estimate still
+        moving is not settled), a floor for model mismatch, the excitation, and a ramp over the
+        first `settle_s` of excitation (the first fits after onset are the worst).
+        """
+        o = self.options
+        history = self._mu_history
+        history.append((now_s, mu_max))
+        while history and history[0][0] < now_s - o.drift_window_s - 0.05:
+            history.popleft()
+        if excitation <= 0.0:
+            if now_s - self._excited_since_s > 0.5:
+                self._excited_since_s = math.inf
+            return 0.0
+        if self._excited_since_s == math.inf or now_s < self._excited_since_s:
+            self._excited_since_s = now_s
+        reference = next((m for t, m in history if t >= now_s - o.drift_window_s), mu_max)
+        scale = max(mu_max, 0.05)
+        drift = abs(mu_max - reference) / scale
+        rel_std = mu_std / scale if math.isfinite(mu_std) else 10.0
+        spread2 = 0.25 * rel_std**2 + drift**2 + o.model_mismatch**2
+        ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
+        confidence = excitation * ramp * math.exp(-0.5 * spread2 / o.confidence_tolerance**2)
+        return confidence if math.isfinite(confidence) else 0.0
+
+    def _axle_scale(self, wheel: int) -> float:
+        """Correction of a wheel's utilised μ for the front/rear brake-gain split (see below)."""
+        a = self._axle_balance
+        return math.exp(0.35 * a) if wheel < 2 else math.exp(-0.65 * a)
+
+    def _balance_axles(self, now_s: float, wheel_mu: np.ndarray, weights: np.ndarray, wheel: np.ndarray) -> None:
+        """Learn the front/rear split of the brake-gain error.
+
+        Pad friction drifts per axle (±20 %); the front end's body-equation check only fixes the
+        total. On one road the front and rear tyres' peaks agree, so a lasting front/rear ratio
+        of the fitted peaks is a brake-gain split: it is removed slowly (time constant
+        `axle_balance_time_constant`), weighting the axles by their usual share of the braking
+        force (≈ 65/35) so the total stays what the body equation says. Brief real front/rear
+        differences (a μ change crossing the wheelbase) last a fraction of a second and barely
+        move it.
+        """
+        o = self.options
+        last = self._last_update_s
+        self._last_update_s = now_s
+        if last is None or o.axle_balance_time_constant <= 0:
+            return
+        dt = min(max(now_s - last, 0.0), 0.1)
+        recent = weights > math.exp(-1.0)
+        if not (np.any(recent & (wheel < 2)) and np.any(recent & (wheel >= 2))):
+            return
+        ratio = float(wheel_mu[0] + wheel_mu[1]) / max(float(wheel_mu[2] + wheel_mu[3]), 1e-6)
+        self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
+        self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
+
     def _excitation(self, slip, mu_meas, wheel, weights, wheel_mu, wheel_lam) -> float:
-        """0 when the recent window never came near the peak; rises to 1 once it has."""
+        """0 unless some wheel's recent data show the peak; rises to 1 as they reach it.
+
+        Two independent pieces of evidence must agree, so that the fit cannot talk itself into
+        excitation by moving its peak onto the data (constant-slip braking would do that):
+        (1) the data come near the fitted peak (slip ≥ `excitation_slip_ratio`·λ*, or utilised μ
+            near μ_max), and
+        (2) the data themselves bend over: a through-origin quadratic μ ≈ aλ + bλ² fitted to the
+            wheel's recent samples has, at the high-slip end, a tangent slope below half its
+            secant slope — the μ–slip relation has flattened, which a linear region never does.
+        """
         o = self.options
         recent = weights > math.exp(-1.5)
-        n = int(np.count_nonzero(recent))
-        if n < 5:
-            return 0.0
-        w = wheel[recent]
-        slip_ratio = slip[recent] / wheel_lam[w]
-        mu_ratio = mu_meas[recent] / wheel_mu[w] * (o.excitation_slip_ratio / o.excitation_mu_ratio)
-        ratio = np.maximum(slip_ratio, mu_ratio)
-        # A high quantile, not the max: a few noisy samples must not count as excitation.
-        k = max(0, n - 1 - max(2, n // 10))
-        best = float(np.partition(ratio, k)[k])
+        best = 0.0
+        for i in range(N_WHEELS):
+            sel = recent & (wheel == i)
+            n = int(np.count_nonzero(sel))
+            if n < 10:
+                continue
+            lam = slip[sel]
+            mu = mu_meas[sel]
+            k_hi = max(0, n - 1 - max(1, n // 10))
+            k_lo = min(n - 1, max(1, n // 10))
+            ordered = np.partition(lam, (k_lo, k_hi))
+            lam_lo, lam_hi = float(ordered[k_lo]), float(ordered[k_hi])
+            if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
+                # No spread of slip, or slips too small for any road's peak (≥ 2–3 % even on
+                # ice): the shape of the curve near its peak is not observed.
+                continue
+            s2, s3, s4 = float(lam @ lam), float(lam @ (lam * lam)), float((lam * lam) @ (lam * lam))
+            y1, y2 = float(lam @ mu), float((lam * lam) @ mu)
+            det = s2 * s4 - s3 * s3
+            if det <= 1e-18 * max(s2 * s4, 1e-300):
+                continue
+            a = (y1 * s4 - y2 * s3) / det
+            b = (s2 * y2 - s3 * y1) / det
+            secant = a + b * lam_hi
+            if secant <= 0:
+                continue
+            bending = (a + 2 * b * lam_hi) / secant
+            if bending > 0.5:
+                continue
+            mu_hi = float(np.partition(mu, k_hi)[k_hi])
+            proximity = max(lam_hi / float(wheel_lam[i]),
+                            mu_hi / float(wheel_mu[i]) * o.excitation_slip_ratio / o.excitation_mu_ratio)
+            best = max(best, proximity)
         if best < o.excitation_slip_ratio:
             return 0.0
         return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
@@ -383,13 +489,12 @@ class LugreTrustRegionEstimator:
         if last is not None:
             return FrictionEstimate(now_s, Status.NOT_EXCITED, last.mu_max, last.slip_at_mu_max, last.theta, 0.0,
                                     last.wheel_mu_max, math.inf)
-        if fitted is not None:
-            mu_max, slip_star, theta, wheel_mu = fitted
-        else:
-            p = self._params(self._x)
-            thetas = self._x[:N_WHEELS] * self._scale[:N_WHEELS]
-            wm, wl = peaks(max(speed, 1.0), p, thetas)
-            mu_max, slip_star, theta, wheel_mu = float(np.mean(wm)), float(np.mean(wl)), float(np.mean(thetas)), tuple(map(float, wm))
+        # Never excited: report the prior (contract: NOT_EXCITED carries the prior or the last
+        # valid value), not a fit that has only seen the linear part of the curve.
+        p = self._params(self._prior)
+        thetas = self._prior[:N_WHEELS] * self._scale[:N_WHEELS]
+        wm, wl = peaks(max(speed, 1.0), p, thetas)
+        mu_max, slip_star, theta, wheel_mu = float(np.mean(wm)), float(np.mean(wl)), float(np.mean(thetas)), tuple(map(float, wm))
         return FrictionEstimate(now_s, Status.NOT_EXCITED, mu_max, slip_star, theta, 0.0, wheel_mu, math.inf)
 
     # ------------------------------------------------------------------------------ tools

@@ -17,13 +17,21 @@ def input_codec_for(config: Config) -> InputCodec:
 
 
 def schedules_for(codec: InputCodec) -> list[MessageSchedule]:
+    """What the simulator must send: each input message at its DBC cycle time."""
     return [MessageSchedule(m.name, m.period_s or 0.01, tuple(m.signals)) for m in codec.input_messages()]
 
 
 def events_to_frames(codec: InputCodec, events: Iterable, time_offset_s: float = 0.0) -> Iterator[Frame]:
+    """One frame per event; a multiplexed message sends its pages in turn, one per event."""
     ids = {m.name: m.frame_id for m in codec.input_messages()}
+    page_counter: dict[str, int] = {}
     for ev in events:
-        yield Frame(ev.time_s + time_offset_s, ids[ev.message], codec.encode_input(ev.message, ev.values))
+        payloads = codec.encode_input(ev.message, ev.values)
+        if not payloads:
+            continue
+        k = page_counter.get(ev.message, 0)
+        page_counter[ev.message] = k + 1
+        yield Frame(ev.time_s + time_offset_s, ids[ev.message], payloads[k % len(payloads)])
 
 
 def simulate_frames(

@@ -1,0 +1,60 @@
+"""`frictiond check-config`: validate a config against its DBC(s) and show the resolved mapping."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .common import EXIT_CONFIG
+
+
+def add_subparser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "check-config",
+        help="validate a config against its DBC and print the resolved signal mapping",
+        description="Loads the config and its DBC file(s), binds every input to its DBC signal and prints "
+        "message, signal, unit, conversion and expected rate. Exit 78 naming the first problem found.",
+    )
+    parser.add_argument("config_path", metavar="CFG", nargs="?", help="config file (default: the built-in one)")
+    parser.set_defaults(func=_do_check)
+
+
+def _do_check(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..codec import validate_against_dbc
+    from ..config import ConfigError, default_config_path, load_config
+    from ..frontend import OPTIONAL_INPUTS, REQUIRED_INPUTS
+
+    path = Path(args.config_path) if args.config_path else default_config_path()
+    try:
+        config = load_config(path)
+        input_codec, output_codec = validate_against_dbc(config)
+    except ConfigError as exc:
+        print(f"frictiond: config error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG
+    out = sys.stdout
+    print(f"config   {config.path}", file=out)
+    print(f"dbc      {', '.join(str(p) for p in config.can.dbc)} (strict={config.can.dbc_strict})", file=out)
+    print(f"bus      {config.can.interface} {config.can.channel}", file=out)
+    print(f"estimator {config.estimator.kind}", file=out)
+    messages = {m.name: m for m in input_codec.input_messages()}
+    print(f"\n{'input':20s} {'message':22s} {'signal':22s} {'dbc unit':9s} {'as':7s} {'to SI':>10s}  rate", file=out)
+    resolved = {r.name: r for r in input_codec.resolved}
+    for name in REQUIRED_INPUTS + OPTIONAL_INPUTS:
+        r = resolved.get(name)
+        if r is None:
+            tag = "(absent: optional)" if name in OPTIONAL_INPUTS else "(MISSING)"
+            print(f"{name:20s} {tag}", file=out)
+            continue
+        msg = messages[r.message]
+        rate = f"{1 / msg.period_s:.0f} Hz" if msg.period_s else "? (no GenMsgCycleTime; assumes 100 Hz)"
+        conv = f"×{r.scale * r.factor:.6g}" + (f" {r.offset * r.factor:+.4g}" if r.offset else "")
+        mux = f" mux {list(r.multiplexer_ids)}" if r.multiplexer_ids else ""
+        note = f"  [{r.note}]" if r.note else ""
+        print(f"{name:20s} {r.message:22s} {r.signal + mux:22s} {r.dbc_unit or '-':9s} {r.unit:7s} {conv:>10s}  {rate}{note}",
+              file=out)
+    print(f"\ntrigger  {input_codec.trigger_message} (one estimator update per frame)", file=out)
+    print(f"outputs  FRICTION_ESTIMATE 0x{output_codec.estimate_id:03X}, FRICTION_WHEEL 0x{output_codec.wheel_id:03X} "
+          f"(from {config.can.output_dbc})", file=out)
+    print("OK", file=out)
+    return 0

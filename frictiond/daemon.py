@@ -1,0 +1,525 @@
+"""`frictiond run`: the live loop on a CAN bus, as a systemd `Type=notify` service.
+
+One thread owns everything: it receives with a short timeout (python-can's Notifier is avoided on
+purpose: it spins on a lasting error), feeds the pipeline, sends the output frames at once with
+`send(timeout=0)` (a full transmit queue drops and counts, it never blocks the estimator), and in
+between does the housekeeping: stale-input ticks, sd_notify STATUS/WATCHDOG, periodic state
+saves, estimate-log flushes, and the bus reconnect with exponential backoff.
+
+Signals only set flags: SIGTERM/SIGINT stop cleanly (state written, `STOPPING=1`, exit 0),
+SIGHUP reloads the config (an invalid new config is reported in one line and the old one kept).
+"""
+from __future__ import annotations
+
+import dataclasses
+import errno
+import logging
+import math
+import signal
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import can
+
+from .busio import frame_to_message, message_to_frame, open_bus
+from .config import Config, ConfigError
+from .estimate_log import EstimateLog
+from .frames import Frame
+from .pipeline import Pipeline
+from .sdnotify import SdNotifier
+from .state import StateFile
+
+log = logging.getLogger(__name__)
+
+# linux/can/error.h: error class bits in the ID of an error frame, controller detail in data[1]
+CAN_ERR_CRTL = 0x004
+CAN_ERR_BUSOFF = 0x040
+CAN_ERR_RESTARTED = 0x100
+CAN_ERR_CRTL_ACTIVE = 0x40
+
+# errno values of a send/recv that mean "the interface is gone or down", not "queue full"
+LINK_ERRNOS = frozenset({errno.ENETDOWN, errno.ENODEV, errno.ENXIO, errno.EBADF, errno.ENETUNREACH})
+FIRST_BACKOFF_S = 0.1
+
+
+class StartupError(Exception):
+    """The daemon cannot start with this configuration (exit 78)."""
+
+
+@dataclass(frozen=True)
+class Overrides:
+    """Command-line settings that win over the config file, also across reloads."""
+
+    interface: str | None = None
+    channel: str | None = None
+    state_file: Path | None = None
+    estimate_log: Path | None = None
+
+    def apply(self, config: Config) -> Config:
+        can_cfg = config.can
+        if self.interface or self.channel:
+            can_cfg = dataclasses.replace(
+                can_cfg, interface=self.interface or can_cfg.interface, channel=self.channel or can_cfg.channel
+            )
+        daemon_cfg = config.daemon
+        if self.state_file is not None:
+            daemon_cfg = dataclasses.replace(daemon_cfg, state_file=self.state_file)
+        output_cfg = config.output
+        if self.estimate_log is not None:
+            output_cfg = dataclasses.replace(output_cfg, estimate_log=self.estimate_log)
+        return dataclasses.replace(config, can=can_cfg, daemon=daemon_cfg, output=output_cfg)
+
+
+class RateGuard:
+    """Token bucket on frame time: at most `rate_hz` sustained, short bursts of `burst` allowed.
+
+    Frame time may jump (NTP steps, spliced logs): a backwards step refills nothing, a forward
+    jump refills at most `burst`.
+    """
+
+    def __init__(self, rate_hz: float, burst: float | None = None) -> None:
+        self.rate_hz = float(rate_hz)
+        self.burst = float(burst) if burst is not None else max(2.0, 0.05 * self.rate_hz)
+        self.tokens = self.burst
+        self._last: float | None = None
+        self.dropped = 0
+
+    def allow(self, time_s: float) -> bool:
+        last = self._last
+        self._last = time_s
+        if last is not None and time_s > last:
+            self.tokens = min(self.burst, self.tokens + (time_s - last) * self.rate_hz)
+        if self.tokens >= 1.0:
+            self.tokens -= 1.0
+            return True
+        self.dropped += 1
+        return False
+
+
+@dataclass
+class DaemonStats:
+    rx_frames: int = 0            # data frames received (error frames not included)
+    tx_frames: int = 0
+    tx_dropped: int = 0           # transmit queue full (or bus down) when sending
+    flood_dropped: int = 0        # trigger frames beyond max_update_rate, never given to the estimator
+    internal_errors: int = 0
+    bus_failures: int = 0         # times the bus went away
+    bus_opens: int = 0
+    bus_off_events: int = 0
+    error_frames: int = 0
+    reloads: int = 0
+    reload_failures: int = 0
+    error_classes: dict[int, int] = field(default_factory=dict)
+
+
+def _errno_of(exc: BaseException) -> int | None:
+    code = getattr(exc, "error_code", None)
+    if isinstance(code, int):
+        return code
+    code = getattr(exc, "errno", None)
+    if isinstance(code, int):
+        return code
+    cause = exc.__cause__
+    return getattr(cause, "errno", None) if cause is not None else None
+
+
+class Daemon:
+    """The live loop. `run()` blocks until `request_stop()` (or SIGTERM/SIGINT) and returns 0."""
+
+    def __init__(
+        self,
+        config: Config,
+        *,
+        config_path: Path | None = None,
+        overrides: Overrides = Overrides(),
+        notifier: SdNotifier | None = None,
+        bus_factory: Callable[..., Any] = open_bus,
+        config_loader: Callable[[Path | None], Config] | None = None,
+        clock: Callable[[], float] = time.time,
+        monotonic: Callable[[], float] = time.monotonic,
+        install_signals: bool = True,
+    ) -> None:
+        self.overrides = overrides
+        self.config = overrides.apply(config)
+        self.config_path = config_path
+        self.notifier = notifier if notifier is not None else SdNotifier()
+        self._bus_factory = bus_factory
+        self._config_loader = config_loader or _load_and_validate
+        self._clock = clock
+        self._mono = monotonic
+        self._install_signals = install_signals
+        self.stats = DaemonStats()
+        self.pipeline = Pipeline(self.config)
+        self._set_rates()
+        self.bus: Any = None
+        self.bus_down = False          # a failure was logged and the bus has not recovered yet
+        self.bus_off = False
+        self._backoff = FIRST_BACKOFF_S
+        self._next_open = 0.0
+        self._stop = threading.Event()
+        self._reload_requested = False
+        self.running = threading.Event()   # set once READY=1 was sent (tests wait on it)
+        self.state_file: StateFile | None = None
+        self.estimate_log: EstimateLog | None = None
+        self._last_rx_time: float | None = None
+        self._last_rx_mono = 0.0
+        self._last_status_text = ""
+        self._last_status_name = ""
+        self._updates_saved = 0
+        self._state_loaded = False
+        self._last_tx_drop_log = -math.inf
+
+    # ------------------------------------------------------------------------------ control
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    def request_reload(self) -> None:
+        self._reload_requested = True
+
+    def _on_signal(self, signum: int, _frame: Any) -> None:
+        if signum == signal.SIGHUP:
+            self._reload_requested = True
+        else:
+            self._stop.set()
+
+    # ------------------------------------------------------------------------------ set-up
+    def _set_rates(self) -> None:
+        cfg = self.config
+        pipeline = self.pipeline
+        self.trigger_id = pipeline.input_codec.trigger_id
+        self.guard = RateGuard(cfg.daemon.max_update_rate)
+        period = pipeline.front_end.period_of(pipeline.trigger_message)
+        self.tick_interval_s = max(0.005, min(period / 2.0, 0.05))
+
+    def _open_state(self) -> None:
+        path = self.config.daemon.state_file
+        self.state_file = StateFile(path) if path is not None else None
+        if self.state_file is not None:
+            self._state_loaded = self.state_file.load_into(self.pipeline.estimator)
+
+    def _open_estimate_log(self) -> EstimateLog | None:
+        out = self.config.output
+        if out.estimate_log is None:
+            return None
+        try:
+            return EstimateLog(out.estimate_log, out.estimate_log_max_bytes, out.estimate_log_backups,
+                               channel=self.config.can.channel)
+        except (OSError, ValueError) as exc:
+            raise StartupError(f"output.estimate_log: cannot open {out.estimate_log}: {exc}") from None
+
+    # ------------------------------------------------------------------------------ bus
+    def _open_bus(self, first: bool = False) -> None:
+        cfg = self.config.can
+        kwargs = {"bitrate": cfg.bitrate} if cfg.bitrate else {}
+        try:
+            self.bus = self._bus_factory(cfg.interface, cfg.channel, self.pipeline.input_codec.input_ids, **kwargs)
+        except (NotImplementedError, ImportError, TypeError) as exc:   # incl. CanInterfaceNotImplementedError
+            raise StartupError(f"can.interface: cannot use {cfg.interface!r}: {exc}") from None
+        except (can.CanError, OSError, ValueError) as exc:
+            self._bus_failed(exc, "open")
+            return
+        self.stats.bus_opens += 1
+        if first:
+            log.info("listening on %s %s for IDs %s", cfg.interface, cfg.channel,
+                     ", ".join(f"0x{i:X}" for i in sorted(self.pipeline.input_codec.input_ids)))
+
+    def _close_bus(self) -> None:
+        bus, self.bus = self.bus, None
+        if bus is not None:
+            try:
+                bus.shutdown()
+            except Exception as exc:  # noqa: BLE001 - closing a broken bus must not fail the loop
+                log.debug("closing bus: %s", exc)
+
+    def _bus_failed(self, exc: BaseException, what: str) -> None:
+        cfg = self.config.can
+        if not self.bus_down:
+            self.bus_down = True
+            self.stats.bus_failures += 1
+            log.warning("CAN %s %s: %s failed (%s); retrying with backoff up to %g s",
+                        cfg.interface, cfg.channel, what, exc, self.config.daemon.reconnect_max_backoff)
+        else:
+            log.debug("CAN %s still failing: %s", what, exc)
+        self._close_bus()
+        self._next_open = self._mono() + self._backoff
+        self._backoff = min(self._backoff * 2.0, self.config.daemon.reconnect_max_backoff)
+
+    def _bus_ok(self) -> None:
+        if self.bus_down:
+            self.bus_down = False
+            cfg = self.config.can
+            log.warning("CAN %s %s is back; resuming", cfg.interface, cfg.channel)
+        self._backoff = FIRST_BACKOFF_S
+
+    # ------------------------------------------------------------------------------ frames
+    def _handle(self, msg: Any) -> None:
+        frame = message_to_frame(msg)
+        if frame.is_error:
+            self._on_error_frame(frame)
+        else:
+            self.stats.rx_frames += 1
+            self._last_rx_time = frame.time_s
+            self._last_rx_mono = self._mono()
+            if frame.can_id == self.trigger_id and not frame.is_extended and not frame.is_remote:
+                if not self.guard.allow(frame.time_s):
+                    self.stats.flood_dropped += 1
+                    if self.stats.flood_dropped == 1:
+                        log.warning("trigger frames arrive faster than daemon.max_update_rate (%g Hz): "
+                                    "dropping the excess", self.config.daemon.max_update_rate)
+                    return
+        try:
+            out = self.pipeline.process(frame)
+        except Exception:  # noqa: BLE001 - one poisoned frame must not take the daemon down
+            self.stats.internal_errors += 1
+            if self.stats.internal_errors == 1:
+                log.exception("internal error processing a frame (dropped; further ones counted)")
+            return
+        if out:
+            self._send(out)
+
+    def _on_error_frame(self, frame: Frame) -> None:
+        st = self.stats
+        st.error_frames += 1
+        cls = frame.can_id & 0x1FFFFFFF
+        st.error_classes[cls] = st.error_classes.get(cls, 0) + 1
+        if cls & CAN_ERR_BUSOFF:
+            if not self.bus_off:
+                st.bus_off_events += 1
+                log.warning("CAN controller is bus-off (error frame class 0x%X)", cls)
+            self.bus_off = True
+        elif self.bus_off and (cls & CAN_ERR_RESTARTED or (
+                cls & CAN_ERR_CRTL and len(frame.data) > 1 and frame.data[1] & CAN_ERR_CRTL_ACTIVE)):
+            self.bus_off = False
+            log.warning("CAN controller restarted after bus-off")
+
+    def _send(self, frames: list[Frame]) -> None:
+        for i, frame in enumerate(frames):
+            bus = self.bus
+            if bus is None:
+                self.stats.tx_dropped += len(frames) - i
+                return
+            try:
+                bus.send(frame_to_message(frame), timeout=0)
+            except (can.CanError, OSError) as exc:
+                if _errno_of(exc) in LINK_ERRNOS:
+                    self.stats.tx_dropped += len(frames) - i
+                    self._bus_failed(exc, "send")
+                    return
+                self.stats.tx_dropped += 1
+                now = self._mono()
+                if now - self._last_tx_drop_log > 10.0:
+                    self._last_tx_drop_log = now
+                    log.warning("transmit queue full: dropping output frames (%d so far)", self.stats.tx_dropped)
+                continue
+            self.stats.tx_frames += 1
+            if self.estimate_log is not None:
+                self.estimate_log.write(frame)
+
+    def frame_now(self) -> float:
+        """"Now" on the time base of the received frames (socket timestamps, or a log's)."""
+        if self._last_rx_time is None:
+            return self._clock()
+        return self._last_rx_time + (self._mono() - self._last_rx_mono)
+
+    # ------------------------------------------------------------------------------ status
+    def status_text(self) -> str:
+        est = self.pipeline.last_estimate
+        name = est.status.name if est is not None else "WAITING"
+        mu = f"MuMax {est.mu_max:.3f}" if est is not None else "MuMax -"
+        parts = [f"{name} {mu}", f"{self._fps:.0f} frames/s"]
+        if self.bus_down or self.bus is None:
+            parts.append("bus down, reconnecting")
+        if self.bus_off:
+            parts.append("bus-off")
+        st = self.stats
+        if st.flood_dropped:
+            parts.append(f"{st.flood_dropped} flood frames dropped")
+        if st.tx_dropped:
+            parts.append(f"{st.tx_dropped} tx dropped")
+        if self.pipeline.stats.error_frames:
+            parts.append(f"{self.pipeline.stats.error_frames} error frames")
+        return ", ".join(parts)
+
+    def _update_status(self, now: float) -> None:
+        dt = now - self._status_at
+        if dt > 0:
+            self._fps = (self.stats.rx_frames - self._status_rx) / dt
+        self._status_at = now
+        self._status_rx = self.stats.rx_frames
+        text = self.status_text()
+        if text != self._last_status_text:
+            self._last_status_text = text
+            self.notifier.status(text)
+        est = self.pipeline.last_estimate
+        name = est.status.name if est is not None else "WAITING"
+        if name != self._last_status_name:
+            self._last_status_name = name
+            log.info("status %s", text)
+
+    # ------------------------------------------------------------------------------ state
+    def save_state(self) -> None:
+        if self.state_file is not None:
+            self.state_file.save(self.pipeline.estimator.state(), self._clock())
+            self._updates_saved = self.pipeline.stats.updates
+
+    # ------------------------------------------------------------------------------ reload
+    def _reload(self) -> None:
+        self._reload_requested = False
+        self.stats.reloads += 1
+        self.notifier.reloading()
+        try:
+            new = self.overrides.apply(self._config_loader(self.config_path))
+            pipeline = Pipeline(new)
+        except (ConfigError, OSError, ValueError) as exc:
+            self.stats.reload_failures += 1
+            log.error("config reload failed, keeping the running config: %s", exc)
+            self.notifier.ready(self.status_text())
+            return
+        old = self.config
+        try:
+            pipeline.estimator.load_state(self.pipeline.estimator.state())
+        except (ValueError, TypeError, KeyError):
+            log.info("estimator changed with the reload: starting from its nominal prior")
+        bus_changed = (new.can.interface, new.can.channel, new.can.bitrate) != (
+            old.can.interface, old.can.channel, old.can.bitrate) or (
+            pipeline.input_codec.input_ids != self.pipeline.input_codec.input_ids)
+        log_changed = (new.output.estimate_log, new.output.estimate_log_max_bytes, new.output.estimate_log_backups) != (
+            old.output.estimate_log, old.output.estimate_log_max_bytes, old.output.estimate_log_backups)
+        self.save_state()
+        self.config = new
+        self.pipeline = pipeline
+        self._set_rates()
+        self._updates_saved = 0
+        if new.daemon.state_file != old.daemon.state_file:
+            self.state_file = StateFile(new.daemon.state_file) if new.daemon.state_file is not None else None
+        if log_changed:
+            if self.estimate_log is not None:
+                self.estimate_log.close()
+            try:
+                self.estimate_log = self._open_estimate_log()
+            except StartupError as exc:
+                log.error("%s; estimate log disabled", exc)
+                self.estimate_log = None
+        if bus_changed:
+            self._close_bus()
+            self.bus_down = False
+            self._backoff = FIRST_BACKOFF_S
+            try:
+                self._open_bus(first=True)
+            except StartupError as exc:
+                log.error("%s; waiting for a usable config", exc)
+                self._next_open = math.inf
+        log.warning("config reloaded from %s", self.config_path or "the built-in default")
+        self.notifier.ready(self.status_text())
+
+    # ------------------------------------------------------------------------------ main loop
+    def run(self) -> int:
+        """Serve until stopped. Returns 0; raises `StartupError` for unusable settings."""
+        previous: dict[int, Any] = {}
+        if self._install_signals and threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
+                previous[sig] = signal.signal(sig, self._on_signal)
+        try:
+            self._open_state()
+            self.estimate_log = self._open_estimate_log()
+            self._open_bus(first=True)
+            self._serve()
+        finally:
+            self._shutdown()
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        return 0
+
+    def _serve(self) -> None:
+        mono = self._mono
+        cfg = self.config
+        now = mono()
+        self._fps = 0.0
+        self._status_at = now
+        self._status_rx = 0
+        next_tick = now + self.tick_interval_s
+        next_status = now + cfg.daemon.status_interval
+        next_state = now + cfg.daemon.state_interval
+        wd_interval = self.notifier.watchdog_interval_s
+        next_wd = now
+        wd_rx = 0
+        self.notifier.ready(self.status_text())
+        self.running.set()
+        log.info("running (watchdog %s)", f"every {wd_interval:.1f} s" if wd_interval else "off")
+        stop = self._stop
+        while not stop.is_set():
+            if self._reload_requested:
+                self._reload()
+                cfg = self.config
+            bus = self.bus
+            if bus is None:
+                now = mono()
+                if now >= self._next_open:
+                    self._open_bus()
+                else:
+                    stop.wait(min(0.1, self._next_open - now, self.tick_interval_s))
+            else:
+                try:
+                    msg = bus.recv(timeout=self.tick_interval_s)
+                except (can.CanError, OSError, ValueError) as exc:
+                    self._bus_failed(exc, "receive")
+                    msg = None
+                else:
+                    if self.bus_down:
+                        self._bus_ok()
+                    elif self._backoff != FIRST_BACKOFF_S:
+                        self._backoff = FIRST_BACKOFF_S
+                    if msg is not None:
+                        self._handle(msg)
+            # --- housekeeping (all on the monotonic clock)
+            now = mono()
+            if now >= next_tick:
+                next_tick = now + self.tick_interval_s
+                if self.bus is not None:
+                    try:
+                        out = self.pipeline.tick(self.frame_now())
+                    except Exception:  # noqa: BLE001
+                        self.stats.internal_errors += 1
+                        out = []
+                        if self.stats.internal_errors == 1:
+                            log.exception("internal error in the stale-input tick")
+                    if out:
+                        self._send(out)
+                if self.estimate_log is not None:
+                    self.estimate_log.poll()
+            if wd_interval and now >= next_wd and self.stats.rx_frames > wd_rx and not self.bus_down:
+                self.notifier.watchdog()
+                wd_rx = self.stats.rx_frames
+                next_wd = now + wd_interval
+            if now >= next_status:
+                next_status = now + cfg.daemon.status_interval
+                self._update_status(now)
+            if now >= next_state:
+                next_state = now + cfg.daemon.state_interval
+                if self.pipeline.stats.updates != self._updates_saved:
+                    self.save_state()
+
+    def _shutdown(self) -> None:
+        self.notifier.stopping(f"stopping: {self.status_text() if hasattr(self, '_fps') else ''}")
+        if self.state_file is not None and (self.pipeline.stats.updates != self._updates_saved or not self._state_loaded):
+            self.save_state()
+        self._close_bus()
+        if self.estimate_log is not None:
+            self.estimate_log.close()
+        st = self.stats
+        ps = self.pipeline.stats
+        log.info("stopped: %d frames in, %d updates, %d frames out, %d tx dropped, %d flood dropped, "
+                 "%d error frames, %d bus failures", st.rx_frames, ps.updates, st.tx_frames, st.tx_dropped,
+                 st.flood_dropped, ps.error_frames, st.bus_failures)
+
+
+def _load_and_validate(path: Path | None) -> Config:
+    from .codec import validate_against_dbc
+    from .config import default_config_path, load_config
+
+    config = load_config(path if path is not None else default_config_path())
+    validate_against_dbc(config)
+    return config

@@ -1,0 +1,212 @@
+"""frictiond over real SocketCAN: canplayer in, candump out, cangen flood, link down/up, stale input.
+
+One harness run (tests/vcan/harness.py) does all live scenarios: on the host's vcan0 if there is
+one, else in a user-mode Linux guest. The verdicts are drawn here, on the host, against
+`frictiond replay` of the same logs. Set FRICTIOND_VCAN_RESULTS=DIR to re-check a finished run.
+"""
+from __future__ import annotations
+
+import bisect
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from frictiond.busio import read_log
+from frictiond.codec import output_codec_for
+from frictiond.config import default_config_path, load_config
+
+from .vcan import harness
+
+pytestmark = pytest.mark.vcan
+
+ESTIMATE_ID, TRIGGER_ID, PRESSURE_ID = 0x3E0, 0xB0, 0xD0
+INPUT_IDS = {0xB0, 0xC0, 0xD0, 0xE0, 0xF0}
+PERIOD_S = 0.01
+MU_TOL = 0.01
+
+
+@pytest.fixture(scope="module")
+def vcan(tmp_path_factory):
+    reuse = os.environ.get("FRICTIOND_VCAN_RESULTS")
+    if reuse:
+        out = Path(reuse)
+        results = json.loads((out / "results.json").read_text())
+        results["out"] = str(out)
+    else:
+        out = tmp_path_factory.mktemp("vcan")
+        results = harness.run_suite(out)
+    print(f"\nvcan suite: {results.get('mode', 'reused')}, {results.get('elapsed_s', 0):.1f} s, "
+          f"inputs {results.get('prepared', {})}")
+    return out, results
+
+
+@pytest.fixture(scope="module")
+def codec():
+    return output_codec_for([default_config_path().parent / "frictiond.dbc"])
+
+
+def scenario(vcan, name):
+    out, results = vcan
+    s = results["scenarios"][name]
+    assert "error" not in s, s["error"]
+    return out, s
+
+
+def frictiond_replay(out: Path, log: Path) -> list:
+    """`frictiond replay LOG --output ...` (the CLI itself), its output frames."""
+    target = out / f"{log.stem}.replayed.log"
+    proc = subprocess.run(
+        [sys.executable, "-m", "frictiond.cli.main", "replay", str(log), "--config", str(out / "frictiond.yaml"),
+         "--output", str(target), "--quiet"],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    return list(read_log(target))
+
+
+def estimates(codec, frames):
+    """(time, status, MuMax) of the FRICTION_ESTIMATE frames, E2E checked."""
+    out = []
+    for f in frames:
+        if f.can_id == ESTIMATE_ID:
+            d = codec.decode_output(f)
+            assert d["e2e"] in ("ok", "repeated", "jump"), d
+            out.append((round(f.time_s, 6), d["EstimatorStatus"], d["MuMax"]))
+    return out
+
+
+def trigger_caused(est_log_estimates, capture):
+    """The daemon's estimates caused by a trigger frame (not by its stale-input tick).
+
+    The estimate log carries the trigger's socket time (ns, rounded to µs); candump prints the
+    same instant truncated to µs: they match within 2 µs. Times are put on candump's grid.
+    """
+    trigger_times = sorted(f.time_s for f in capture if f.can_id == TRIGGER_ID)
+    caused, ticks = [], []
+    for t, status, mu in est_log_estimates:
+        i = bisect.bisect_left(trigger_times, t - 2e-6)
+        if i < len(trigger_times) and abs(trigger_times[i] - t) <= 2e-6:
+            caused.append((round(trigger_times[i], 6), status, mu))
+        else:
+            ticks.append((t, status, mu))
+    return caused, ticks
+
+
+def compressed(statuses):
+    seq = []
+    for s in statuses:
+        if not seq or seq[-1] != s:
+            seq.append(s)
+    return seq
+
+
+def check_live_equals_replay(out: Path, name: str, codec, original: Path) -> dict:
+    capture = list(read_log(out / f"{name}-capture.log"))
+    live = estimates(codec, read_log(out / f"{name}-est.log"))
+    caused, ticks = trigger_caused(live, capture)
+    inputs_seen = [f for f in capture if f.can_id in INPUT_IDS]
+    played = [f for f in read_log(original) if f.can_id in INPUT_IDS]
+    assert len(inputs_seen) == len(played), "candump missed input frames"
+    # every frame the daemon sent is on the bus
+    on_bus = [f for f in capture if f.can_id == ESTIMATE_ID]
+    assert len(on_bus) == len(live)
+    # 1. the frames as they were on the bus (candump) through `frictiond replay`: the same status
+    # for (nearly) every update, MuMax within tolerance. (Not bit-identical: the daemon sees nanosecond
+    # socket times, candump keeps microseconds, and the estimate reacts to sub-µs timing at times;
+    # MuMax is only compared where it is meant to be trusted, VALID.)
+    from_capture = estimates(codec, frictiond_replay(out, out / f"{name}-capture.log"))
+    assert [t for t, _, _ in caused] == [t for t, _, _ in from_capture]      # one estimate per trigger
+    agree_capture = sum(a[1] == b[1] for a, b in zip(caused, from_capture)) / len(caused)
+    assert agree_capture >= 0.98, agree_capture
+    assert compressed(s for _, s, _ in caused)[:3] == compressed(s for _, s, _ in from_capture)[:3]
+    worst_capture = max(abs(a[2] - b[2]) for a, b in zip(caused, from_capture) if a[1] == b[1] == "VALID")
+    assert worst_capture <= MU_TOL, worst_capture
+    # 2. the played log through `frictiond replay` (the log's own timestamps). canplayer reproduces
+    # the timing only to a few milliseconds in the slow guest (over 10 ms with a flood hogging its
+    # one CPU), and the estimator's transient depends on the timestamps: statuses mostly agree, the
+    # final estimate agrees within tolerance; the per-update differences are reported.
+    from_log = estimates(codec, frictiond_replay(out, original))
+    assert len(caused) == len(from_log)
+    agree = sum(a[1] == b[1] for a, b in zip(caused, from_log)) / len(from_log)
+    assert agree >= 0.9, agree
+    assert compressed(s for _, s, _ in caused)[:3] == compressed(s for _, s, _ in from_log)[:3]
+    settled = int(1.0 / PERIOD_S)
+    worst_settled = max(abs(a[2] - b[2]) for a, b in zip(caused[-settled:], from_log[-settled:]))
+    worst = max(abs(a[2] - b[2]) for a, b in zip(caused, from_log) if a[1] == b[1] == "VALID")
+    assert caused[-1][1] == from_log[-1][1] == "VALID"
+    assert abs(caused[-1][2] - from_log[-1][2]) <= MU_TOL
+    capture_inputs = [f.time_s for f in capture if f.can_id == TRIGGER_ID]
+    log_inputs = [f.time_s for f in played if f.can_id == TRIGGER_ID]
+    jitter = max(abs((a - capture_inputs[0]) - (b - log_inputs[0])) for a, b in zip(capture_inputs, log_inputs))
+    assert all(s == "INPUT_STALE" for _, s, _ in ticks)
+    return {"updates": len(caused), "ticks": len(ticks), "status_agreement_vs_capture": round(agree_capture, 4),
+            "max_valid_mu_diff_vs_capture": round(worst_capture, 4), "status_agreement_vs_log": round(agree, 4),
+            "max_valid_mu_diff_vs_log": round(worst, 4), "max_settled_mu_diff_vs_log": round(worst_settled, 4),
+            "max_playback_timing_error_s": round(jitter, 4),
+            "final": caused[-1], "final_replay_of_log": from_log[-1]}
+
+
+def test_live_estimates_equal_frictiond_replay(vcan, codec):
+    out, s = scenario(vcan, "replay")
+    assert s["rc"] == 0
+    assert s["notify"][0].startswith("READY=1") and s["notify"][-1].startswith("STOPPING=1")
+    report = check_live_equals_replay(out, "replay", codec, out / "braking.log")
+    print("replay:", report)
+
+
+def test_flood_on_other_ids_does_not_change_the_estimate(vcan, codec):
+    out, s = scenario(vcan, "flood")
+    assert s["rc"] == 0
+    played_inputs = sum(1 for f in read_log(out / "braking.log") if f.can_id in INPUT_IDS)
+    flood_frames = s["link_after"]["tx_packets"] - s["link_before"]["tx_packets"] - played_inputs
+    assert flood_frames >= 5 * played_inputs, flood_frames     # several times the input traffic
+    err = (out / "flood-daemon.err").read_text()
+    assert "0 flood dropped" in err
+    assert f"stopped: {played_inputs} frames in," in err       # exactly the inputs: the kernel filtered the flood
+    report = check_live_equals_replay(out, "flood", codec, out / "braking.log")
+    clean = check_live_equals_replay(out, "replay", codec, out / "braking.log")
+    assert report["final"][1] == clean["final"][1] == "VALID"
+    assert abs(report["final"][2] - clean["final"][2]) <= MU_TOL
+    print("flood:", flood_frames, "frames of ID 0x123;", report)
+
+
+def test_link_down_and_up_mid_run_frictiond_survives_and_resumes(vcan, codec):
+    out, s = scenario(vcan, "linkdown")
+    assert s["alive_while_down"] and s["alive_after"] and s["rc"] == 0
+    err = (out / "linkdown-daemon.err").read_text().splitlines()
+    assert len([l for l in err if "retrying with backoff" in l]) == 1     # logged once
+    assert len([l for l in err if "is back; resuming" in l]) == 1
+    after = [f for f in read_log(out / "linkdown-capture.log") if f.time_s > s["up_at"]]
+    sent_after = [f for f in after if f.can_id == ESTIMATE_ID]
+    triggers_after = [f for f in after if f.can_id == TRIGGER_ID]
+    assert triggers_after and len(sent_after) >= len(triggers_after)      # one estimate per trigger
+    assert all(codec.decode_output(f)["e2e"] in ("ok", "repeated", "jump") for f in sent_after)
+
+
+def test_stopping_an_input_yields_input_stale_within_three_periods(vcan, codec):
+    out, s = scenario(vcan, "stale")
+    assert s["rc"] == 0
+    capture = list(read_log(out / "stale-capture.log"))
+    live = estimates(codec, read_log(out / "stale-est.log"))
+    last_pressure = max(f.time_s for f in capture if f.can_id == PRESSURE_ID)
+    after = [e for e in live if e[0] > last_pressure + 1e-6]
+    first_stale = next(e for e in after if e[1] == "INPUT_STALE")
+    assert first_stale[0] - last_pressure <= 3 * PERIOD_S + PERIOD_S + 2e-3   # stale after 3 periods, at the next trigger
+    assert all(e[1] == "INPUT_STALE" for e in after if e[0] >= first_stale[0])
+    # then the trigger itself stops (end of the log): the loop's tick reports it
+    last_trigger = max(f.time_s for f in capture if f.can_id == TRIGGER_ID)
+    ticks = [e for e in live if e[0] > last_trigger + 1e-6]
+    assert ticks and ticks[0][1] == "INPUT_STALE"
+    assert ticks[0][0] - last_trigger <= 3 * PERIOD_S + 0.03, ticks[0][0] - last_trigger
+    print(f"stale: pressure stop -> INPUT_STALE after {first_stale[0] - last_pressure:.3f} s, "
+          f"trigger stop -> tick INPUT_STALE after {ticks[0][0] - last_trigger:.3f} s")
+
+
+def test_suite_stays_within_its_time_budget(vcan):
+    _, results = vcan
+    if "elapsed_s" in results:
+        assert results["elapsed_s"] < 300

@@ -34,7 +34,7 @@ import numpy as np
 
 from . import trust_region
 from .samples import FrictionEstimate, PhysicalSample, Status
-from .tyre_model import LugreParams, mu_and_jacobian_theta, peaks
+from .tyre_model import LugreParams, braking_mu_and_partials, mu_and_jacobian_theta, peaks
 from .vehicle import VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
@@ -47,7 +47,7 @@ class LugreTROptions:
 
     window_s: float = 0.8                 # samples older than this leave the window
     forgetting_time_constant: float = 0.4  # s; weight exp(−age/τ)
-    max_iterations: int = 3               # trust-region iterations per update (bounded work)
+    max_iterations: int = 2               # trust-region iterations per update (bounded work)
     measurement_std: float = 0.04         # assumed std of a utilised-μ sample (sets the prior's weight)
     # Priors (nominal values; Canudas-de-Wit et al. 2003 except θ) and their standard deviations.
     prior_theta: float = 1.2
@@ -169,6 +169,14 @@ class LugreTrustRegionEstimator:
                                                                      o.prior_std_sigma2]) / self._scale
         self._base = LugreParams(mu_c=o.mu_c, mu_s=o.mu_s, alpha=o.alpha, patch_length=o.patch_length)
         self._saved_prior: np.ndarray | None = None
+        self._J_prior = np.diag(1.0 / self._prior_std)
+        # Soft ties between wheels' θ: front–rear on each side, left–right on each axle.
+        self._tie_a = np.array([0, 1, 0, 2])
+        self._tie_b = np.array([2, 3, 1, 3])
+        self._tie_rel = np.array([o.front_rear_coupling, o.front_rear_coupling,
+                                  o.left_right_coupling, o.left_right_coupling])
+        self._work: np.ndarray | None = None
+        self._prior_peak: tuple[float, tuple] | None = None
         self.reset()
 
     # ------------------------------------------------------------------------------ state
@@ -243,31 +251,32 @@ class LugreTrustRegionEstimator:
         return estimate
 
     def _residuals(self, x: np.ndarray, slip, speed, mu_meas, weights, wheel) -> tuple[np.ndarray, np.ndarray]:
-        o = self.options
+        """Weighted data residuals, then the priors, then the soft ties between wheels' θ."""
         p = self._params(x)
-        theta = (x[:N_WHEELS] * self._scale[:N_WHEELS])[wheel]
-        model, jac = mu_and_jacobian_theta(slip, speed, theta, p, ("theta",) + SHARED)
-        sw = np.sqrt(weights) / o.measurement_std
-        r_data = sw * (model - mu_meas)
+        scale = self._scale
+        theta = (x[:N_WHEELS] * scale[:N_WHEELS])[wheel]
         m = len(slip)
-        J = np.zeros((m, N_WHEELS + len(SHARED)))
-        J[np.arange(m), wheel] = jac[:, 0] * sw * self._scale[0]
-        J[:, N_WHEELS:] = jac[:, 1:] * sw[:, None] * self._scale[N_WHEELS:]
-        # Priors and the soft ties between wheels.
-        r_prior = (x - self._prior) / self._prior_std
-        J_prior = np.diag(1.0 / self._prior_std)
+        n = len(x)
+        rows = m + n + len(self._tie_a)
+        if self._work is None or self._work.shape[0] < m:
+            self._work = np.empty((max(m, 64) * 2, 4))
+        partials = self._work[:m]
+        model = braking_mu_and_partials(slip, speed, theta, p, partials)
+        sw = np.sqrt(weights) * (1.0 / self.options.measurement_std)
+        r = np.empty(rows)
+        J = np.zeros((rows, n))
+        r[:m] = sw * (model - mu_meas)
+        J[np.arange(m), wheel] = partials[:, 0] * sw * scale[0]
+        J[:m, N_WHEELS:] = partials[:, 1:] * (sw[:, None] * scale[N_WHEELS:])
+        r[m:m + n] = (x - self._prior) / self._prior_std
+        J[m:m + n] = self._J_prior
         th = x[:N_WHEELS]
-        mean_th = max(float(np.mean(th)), 1e-6)
-        ties = ((0, 2, o.front_rear_coupling), (1, 3, o.front_rear_coupling),
-                (0, 1, o.left_right_coupling), (2, 3, o.left_right_coupling))
-        r_tie = np.empty(len(ties))
-        J_tie = np.zeros((len(ties), len(x)))
-        for k, (a, b, rel) in enumerate(ties):
-            s = rel * mean_th
-            r_tie[k] = (th[a] - th[b]) / s
-            J_tie[k, a] = 1.0 / s
-            J_tie[k, b] = -1.0 / s
-        return np.concatenate([r_data, r_prior, r_tie]), np.vstack([J, J_prior, J_tie])
+        tie_scale = self._tie_rel * max(float(th.mean()), 1e-6)
+        r[m + n:] = (th[self._tie_a] - th[self._tie_b]) / tie_scale
+        k = np.arange(len(self._tie_a))
+        J[m + n + k, self._tie_a] = 1.0 / tie_scale
+        J[m + n + k, self._tie_b] = -1.0 / tie_scale
+        return r, J
 
     def _params(self, x: np.ndarray) -> LugreParams:
         sigma0, v_s, sigma2 = x[N_WHEELS:] * self._scale[N_WHEELS:]
@@ -395,7 +404,9 @@ class LugreTrustRegionEstimator:
         scale = max(mu_max, 0.05)
         drift = abs(mu_max - reference) / scale
         rel_std = mu_std / scale if math.isfinite(mu_std) else 10.0
-        spread2 = 0.25 * rel_std**2 + drift**2 + o.model_mismatch**2
+        # The delta-method term is capped: measured against the simulator's truths, a large
+        # covariance along a flat shape direction (v_s, σ2) did not mean a wrong μ_max.
+        spread2 = 0.25 * min(rel_std, 0.1) ** 2 + drift**2 + o.model_mismatch**2
         ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
         confidence = excitation * ramp * math.exp(-0.5 * spread2 / o.confidence_tolerance**2)
         return confidence if math.isfinite(confidence) else 0.0

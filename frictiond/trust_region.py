@@ -54,22 +54,22 @@ def _scaling(x: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> tu
     return v, dv
 
 
-def _subproblem(H: np.ndarray, g: np.ndarray, radius: float) -> np.ndarray:
-    """argmin ½ sᵀHs + gᵀs over ‖s‖ ≤ radius, H symmetric (possibly indefinite)."""
-    w, Q = np.linalg.eigh(H)
-    a = Q.T @ g
+def _subproblem(eig: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float) -> np.ndarray:
+    """argmin ½ sᵀHs + gᵀs over ‖s‖ ≤ radius, from H = Q diag(w) Qᵀ and a = Qᵀg (H may be indefinite)."""
+    w, Q, a = eig
     if w[0] > 1e-12 * max(1.0, abs(w[-1])):
         s = -(a / w)
         if float(s @ s) <= radius * radius:
             return Q @ s
-    # Boundary solution: find λ ≥ max(0, −w_min) with ‖(H + λI)⁻¹ g‖ = radius.
+    # Boundary solution: find λ ≥ max(0, −w_min) with ‖(H + λI)⁻¹ g‖ = radius (Newton on the
+    # secular equation 1/radius − 1/‖s(λ)‖ = 0, which is nearly linear in λ).
     lam_low = max(0.0, -w[0]) + 1e-14 * max(1.0, abs(w[-1]))
-    norm_a = float(np.linalg.norm(a))
+    norm_a = math.sqrt(float(a @ a))
     lam = max(lam_low, norm_a / radius - w[0])
     for _ in range(50):
         denom = w + lam
         s = a / denom
-        ns = float(np.linalg.norm(s))
+        ns = math.sqrt(float(s @ s))
         if ns == 0.0:
             break
         phi = 1.0 / radius - 1.0 / ns
@@ -112,7 +112,7 @@ def solve(
     g = J.T @ r
     if radius is None or not math.isfinite(radius) or radius <= 0:
         v, _ = _scaling(x, g, lb, ub)
-        radius = float(np.linalg.norm(x / np.sqrt(v))) or 1.0
+        radius = math.sqrt(float(np.sum(x * x / v))) or 1.0
     converged = False
     iterations = 0
     while iterations < max_iterations:
@@ -124,10 +124,12 @@ def solve(
         g_h = d * g
         J_h = J * d
         H = J_h.T @ J_h + np.diag(g * dv)
+        w, Q = np.linalg.eigh(H)
+        eig = (w, Q, Q.T @ g_h)
         iterations += 1
         # Inner loop: shrink the radius until a step decreases the cost.
         for _attempt in range(60):
-            s_h = _subproblem(H, g_h, radius)
+            s_h = _subproblem(eig, radius)
             s = d * s_h
             # Stay strictly inside the box: a component that would cross its bound goes a
             # fraction θ of the way there, the others keep their full length (a projected
@@ -144,7 +146,7 @@ def solve(
             evaluations += 1
             cost_new = 0.5 * float(r_new @ r_new)
             actual = cost - cost_new
-            step_norm = float(np.linalg.norm(s_h))
+            step_norm = math.sqrt(float(s_h @ s_h))
             ratio = actual / predicted if predicted > 0 else -1.0
             if ratio < 0.25:
                 radius = 0.25 * step_norm if step_norm > 0 else 0.25 * radius
@@ -152,15 +154,15 @@ def solve(
                 radius *= 2.0
             if actual > 0 and math.isfinite(cost_new):
                 break
-            if radius < 1e-12 * (1.0 + float(np.linalg.norm(x))):
+            if radius < 1e-12 * (1.0 + math.sqrt(float(x @ x))):
                 return TrustRegionResult(x, cost, r, J, radius, iterations, True, evaluations)
         else:
             return TrustRegionResult(x, cost, r, J, radius, iterations, True, evaluations)
-        x_norm = float(np.linalg.norm(x))
+        x_norm = math.sqrt(float(x @ x))
         x, r, J = x_new, r_new, J_new
         g = J.T @ r
         small_cost = actual < ftol * cost
-        small_step = float(np.linalg.norm(s)) < xtol * (xtol + x_norm)
+        small_step = math.sqrt(float(s @ s)) < xtol * (xtol + x_norm)
         cost = cost_new
         if small_cost or small_step:
             converged = True

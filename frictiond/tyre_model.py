@@ -153,10 +153,44 @@ def mu_and_jacobian_theta(slip, speed_mps, theta, p: LugreParams, names: tuple[s
     return value, np.stack(columns, axis=-1)
 
 
+def braking_mu_and_partials(lam: np.ndarray, v: np.ndarray, theta: np.ndarray, p: LugreParams,
+                            out: np.ndarray) -> np.ndarray:
+    """Fast path of the estimator: μ and ∂μ/∂(θ, σ0, v_s, σ2) for positive (braking) slip.
+
+    Writes the four partials into the columns of `out` (shape (m, 4)) and returns μ. Same
+    formulas as `mu_and_jacobian_theta`, with the work shared between columns (this runs several
+    times per bus cycle).
+    """
+    lam = np.minimum(lam, MAX_MODEL_SLIP)
+    lam_v = lam * v
+    ratio = (lam_v * (1.0 / p.v_s)) ** p.alpha
+    e = np.exp(-ratio)
+    dmu_s = p.mu_s - p.mu_c
+    g = p.mu_c + dmu_s * e
+    inv_theta = 1.0 / theta
+    Z = theta * (p.sigma0 * p.patch_length) * lam / (g * (1.0 - lam))
+    Zs = np.maximum(Z, _SMALL_Z)
+    one_minus = -np.expm1(-Zs)
+    inv_Z = 1.0 / Zs
+    F = 1.0 - one_minus * inv_Z
+    dF = (one_minus - Zs * np.exp(-Zs)) * inv_Z * inv_Z
+    small = Z < _SMALL_Z
+    if small.any():
+        F = np.where(small, Z / 2.0 - Z * Z / 6.0, F)
+        dF = np.where(small, 0.5 - Z / 3.0, dF)
+    g_over_theta = g * inv_theta
+    ZdF = Z * dF
+    out[:, 0] = g_over_theta * inv_theta * (ZdF - F)
+    out[:, 1] = g_over_theta * ZdF * (1.0 / p.sigma0)
+    out[:, 2] = (F - ZdF) * inv_theta * dmu_s * e * (p.alpha / p.v_s) * ratio
+    out[:, 3] = lam_v
+    return g_over_theta * F + p.sigma2 * lam_v
+
+
 # Peak search: a fixed slip grid, then a fine grid around the best point and a parabola
 # through the three best fine points. Vectorised over several θ (one per wheel).
-_PEAK_GRID = np.concatenate([np.geomspace(1e-3, 0.05, 40), np.linspace(0.05, MAX_MODEL_SLIP, 120)[1:]])
-_FINE = np.linspace(-1.0, 1.0, 41)
+_PEAK_GRID = np.geomspace(2e-3, MAX_MODEL_SLIP, 64)
+_FINE = np.linspace(-1.0, 1.0, 25)
 
 
 def peaks(speed_mps: float, p: LugreParams, thetas) -> tuple[np.ndarray, np.ndarray]:

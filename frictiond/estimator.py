@@ -79,7 +79,8 @@ class LugreTROptions:
     min_samples: int = 25
     excitation_slip_ratio: float = 0.75   # slip must have reached this fraction of λ*
     excitation_mu_ratio: float = 0.85     # ... or the utilised μ this fraction of μ_max
-    excitation_min_slip: float = 0.03     # no road peaks below this slip; smaller excursions prove nothing
+    excitation_min_slip: float = 0.015    # no road peaks below this slip; smaller excursions prove nothing
+    max_peak_secant: float = 15.0         # μ/λ at a peak stays below this on every road
     valid_confidence: float = 0.5
     confidence_tolerance: float = 0.06    # relative μ_max uncertainty at which confidence = e^(−½)
     model_mismatch: float = 0.03          # relative floor of the uncertainty (the road is not LuGre)
@@ -466,7 +467,7 @@ class LugreTrustRegionEstimator:
             ordered = np.partition(lam, (k_lo, k_hi))
             lam_lo, lam_hi = float(ordered[k_lo]), float(ordered[k_hi])
             if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
-                # No spread of slip, or slips too small for any road's peak (≥ 2–3 % even on
+                # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
                 # ice): the shape of the curve near its peak is not observed.
                 continue
             s2, s3, s4 = float(lam @ lam), float(lam @ (lam * lam)), float((lam * lam) @ (lam * lam))
@@ -483,6 +484,10 @@ class LugreTrustRegionEstimator:
             if bending > 0.5:
                 continue
             mu_hi = float(np.partition(mu, k_hi)[k_hi])
+            if mu_hi > o.max_peak_secant * lam_hi:
+                # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
+                # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
+                continue
             proximity = max(lam_hi / float(wheel_lam[i]),
                             mu_hi / float(wheel_mu[i]) * o.excitation_slip_ratio / o.excitation_mu_ratio)
             best = max(best, proximity)

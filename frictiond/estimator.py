@@ -34,7 +34,7 @@ import numpy as np
 
 from . import trust_region
 from .samples import FrictionEstimate, PhysicalSample, Status
-from .tyre_model import LugreParams, braking_mu_and_partials, mu_and_jacobian_theta, peaks
+from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta, peaks
 from .vehicle import VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
@@ -48,6 +48,8 @@ class LugreTROptions:
     window_s: float = 0.8                 # samples older than this leave the window
     forgetting_time_constant: float = 0.4  # s; weight exp(−age/τ)
     max_iterations: int = 2               # trust-region iterations per update (bounded work)
+    ftol: float = 1e-4                    # per-update stopping tolerances (the next update continues)
+    xtol: float = 1e-4
     measurement_std: float = 0.04         # assumed std of a utilised-μ sample (sets the prior's weight)
     # Priors (nominal values; Canudas-de-Wit et al. 2003 except θ) and their standard deviations.
     prior_theta: float = 1.2
@@ -80,15 +82,19 @@ class LugreTROptions:
     excitation_slip_ratio: float = 0.75   # slip must have reached this fraction of λ*
     excitation_mu_ratio: float = 0.85     # ... or the utilised μ this fraction of μ_max
     excitation_min_slip: float = 0.015    # no road peaks below this slip; smaller excursions prove nothing
-    max_peak_secant: float = 15.0         # μ/λ at a peak stays below this on every road
+    max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
+    excitation_every: int = 3             # updates between excitation evaluations
+    excitation_window_s: float = 0.3      # the newest samples that must show the peak
     valid_confidence: float = 0.5
     confidence_tolerance: float = 0.06    # relative μ_max uncertainty at which confidence = e^(−½)
     model_mismatch: float = 0.03          # relative floor of the uncertainty (the road is not LuGre)
     drift_window_s: float = 0.15
     settle_s: float = 0.05                # confidence ramps up over the first excited instants
-    hold_s: float = 2.0                   # VALID is kept this long after the last excited sample
-    jump_threshold: float = 3.5           # change detector: newest mean residual in noise std units
+    hold_s: float = 2.0                   # VALID is kept this long after braking ends
+    excitation_hold_s: float = 0.15       # ... and this long while braking without excitation
+    jump_threshold: float = 2.5           # change detector: newest mean residual in noise std units
     jump_window_s: float = 0.08
+    jump_refractory_s: float = 0.3        # after a detected jump, let the new road fill the window
     axle_balance_time_constant: float = 2.0   # s; 0 disables the front/rear brake-gain balance
     axle_balance_limit: float = 0.3
 
@@ -176,6 +182,9 @@ class LugreTrustRegionEstimator:
         self._tie_b = np.array([2, 3, 1, 3])
         self._tie_rel = np.array([o.front_rear_coupling, o.front_rear_coupling,
                                   o.left_right_coupling, o.left_right_coupling])
+        self._tie_rows = np.arange(len(self._tie_a))
+        if self._scale[0] != 1.0:
+            raise AssertionError("θ is fitted unscaled")
         self._work: np.ndarray | None = None
         self._prior_peak: tuple[float, tuple] | None = None
         self.reset()
@@ -195,9 +204,14 @@ class LugreTrustRegionEstimator:
         self._jumps = 0
         self._axle_balance = 0.0
         self._mu_history: deque[tuple[float, float]] = deque()
+        self._excitation_cache: float | None = None
+        self._innovation_score = 0.0
+        self._last_jump_s = -math.inf
+        self._last_peak_slips: np.ndarray | None = None
         self._excited_since_s = math.inf
         self._last_update_s: float | None = None
         self._cov: np.ndarray | None = None
+        self._cov_unit: np.ndarray | None = None
 
     def state(self) -> dict[str, Any]:
         """JSON-serialisable: fitted parameters and the last valid estimate (a prior for a restart)."""
@@ -244,39 +258,40 @@ class LugreTrustRegionEstimator:
                 added += 1
         window.drop_before(t - o.window_s)
         if added and len(window) >= o.min_samples:
-            self._detect_jump(t)
             estimate = self._fit(t, v)
         else:
             estimate = self._hold(t, v)
         self._last_estimate = estimate
         return estimate
 
-    def _residuals(self, x: np.ndarray, slip, speed, mu_meas, weights, wheel) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted data residuals, then the priors, then the soft ties between wheels' θ."""
+    def _residuals(self, x: np.ndarray, slip, speed, mu_meas, sw, wheel, rows_index=None) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted data residuals, then the priors, then the soft ties between wheels' θ.
+
+        `sw` are the data rows' weights √w/σ (fixed within one update).
+        """
         p = self._params(x)
         scale = self._scale
         theta = (x[:N_WHEELS] * scale[:N_WHEELS])[wheel]
         m = len(slip)
         n = len(x)
-        rows = m + n + len(self._tie_a)
+        n_ties = len(self._tie_a)
         if self._work is None or self._work.shape[0] < m:
             self._work = np.empty((max(m, 64) * 2, 4))
         partials = self._work[:m]
         model = braking_mu_and_partials(slip, speed, theta, p, partials)
-        sw = np.sqrt(weights) * (1.0 / self.options.measurement_std)
-        r = np.empty(rows)
-        J = np.zeros((rows, n))
+        r = np.empty(m + n + n_ties)
+        J = np.zeros((m + n + n_ties, n))
         r[:m] = sw * (model - mu_meas)
-        J[np.arange(m), wheel] = partials[:, 0] * sw * scale[0]
-        J[:m, N_WHEELS:] = partials[:, 1:] * (sw[:, None] * scale[N_WHEELS:])
+        J[rows_index if rows_index is not None else np.arange(m), wheel] = partials[:, 0] * sw
+        J[:m, N_WHEELS:] = partials[:, 1:] * sw[:, None] * scale[N_WHEELS:]
         r[m:m + n] = (x - self._prior) / self._prior_std
         J[m:m + n] = self._J_prior
         th = x[:N_WHEELS]
         tie_scale = self._tie_rel * max(float(th.mean()), 1e-6)
         r[m + n:] = (th[self._tie_a] - th[self._tie_b]) / tie_scale
-        k = np.arange(len(self._tie_a))
-        J[m + n + k, self._tie_a] = 1.0 / tie_scale
-        J[m + n + k, self._tie_b] = -1.0 / tie_scale
+        inv = 1.0 / tie_scale
+        J[self._tie_rows + (m + n), self._tie_a] = inv
+        J[self._tie_rows + (m + n), self._tie_b] = -inv
         return r, J
 
     def _params(self, x: np.ndarray) -> LugreParams:
@@ -288,41 +303,59 @@ class LugreTrustRegionEstimator:
     def _weights(self, now_s: float, times: np.ndarray) -> np.ndarray:
         return np.exp((times - now_s) / self.options.forgetting_time_constant)
 
-    def _detect_jump(self, now_s: float) -> None:
-        """Drop the window's older samples when the newest ones disagree with the fit (a μ jump)."""
+    def _innovation(self, now_s: float, times: np.ndarray, r_data: np.ndarray, weights: np.ndarray) -> float:
+        """How far the newest samples' mean residual sits from zero, in standard errors.
+
+        A few hundred older samples pin the fit, so a change of road shows first as a mean
+        offset of the newest residuals far beyond the noise.
+        """
         o = self.options
-        slip, speed, mu_meas, times, wheel = self._window.view()
         recent = times >= now_s - o.jump_window_s
         n_recent = int(np.count_nonzero(recent))
         if n_recent < 8 or self._fits < 5 or len(times) - n_recent < 2 * n_recent:
-            return
-        theta = (self._x[:N_WHEELS] * self._scale[:N_WHEELS])[wheel[recent]]
-        model, _ = mu_and_jacobian_theta(slip[recent], speed[recent], theta, self._params(self._x), ("theta",))
-        resid = mu_meas[recent] - model
+            return 0.0
+        # Back from weighted, normalised residuals to μ units (model − measurement).
+        resid = r_data[recent] * o.measurement_std / np.sqrt(weights[recent])
         noise = max(o.measurement_std, float(np.std(resid)))
         score = abs(float(np.mean(resid))) / (noise / math.sqrt(n_recent))
         same_sign = abs(float(np.mean(np.sign(resid))))
-        if score > o.jump_threshold * 2.0 and same_sign > 0.7:
+        return score if same_sign > 0.7 else min(score, o.jump_threshold)
+
+    def _detect_jump(self, now_s: float, score: float) -> None:
+        """Drop the window's older samples when the newest ones disagree with the fit (a μ jump)."""
+        o = self.options
+        if score > o.jump_threshold * 2.0 and now_s - self._last_jump_s > o.jump_refractory_s:
             self._window.drop_before(now_s - o.jump_window_s - 1e-9)
-            # Let θ move again: restart from the prior's θ spread, keep the shape parameters.
-            self._radius = None
+            self._radius = None  # let the parameters move freely again
             self._jumps += 1
+            self._last_jump_s = now_s
+            # What was valid described the old road: nothing may be held VALID from it.
+            self._last_valid = None
+            self._last_excited_s = -math.inf
+            self._excitation_cache = None
+            self._mu_history.clear()
 
     def _fit(self, now_s: float, speed: float) -> FrictionEstimate:
         o = self.options
         slip, speeds, mu_meas, times, wheel = self._window.view()
         weights = self._weights(now_s, times)
+        sw = np.sqrt(weights) * (1.0 / o.measurement_std)
+        rows_index = np.arange(len(slip))
 
         def fun(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            return self._residuals(x, slip, speeds, mu_meas, weights, wheel)
+            return self._residuals(x, slip, speeds, mu_meas, sw, wheel, rows_index)
 
         result = trust_region.solve(fun, self._x, self._lb, self._ub, radius=self._radius,
-                                    max_iterations=o.max_iterations, ftol=1e-6, xtol=1e-6, gtol=1e-8)
+                                    max_iterations=o.max_iterations, ftol=o.ftol, xtol=o.xtol, gtol=1e-8,
+                                    max_rejections=4)
         self._x = result.x
         self._radius = max(result.radius, 1e-3)
         self._fits += 1
-        return self._report(now_s, speed, result.residuals[: len(slip)], result.jacobian, weights, slip, mu_meas,
-                            speeds, wheel)
+        r_data = result.residuals[: len(slip)]
+        self._innovation_score = self._innovation(now_s, times, r_data, weights)
+        estimate = self._report(now_s, speed, r_data, result.jacobian, weights, slip, mu_meas, speeds, wheel)
+        self._detect_jump(now_s, self._innovation_score)
+        return estimate
 
     def _report(self, now_s: float, speed: float, r_data: np.ndarray, J: np.ndarray, weights: np.ndarray,
                 slip: np.ndarray, mu_meas: np.ndarray, speeds: np.ndarray, wheel: np.ndarray) -> FrictionEstimate:
@@ -331,9 +364,11 @@ class LugreTrustRegionEstimator:
         p = self._params(x)
         thetas = x[:N_WHEELS] * self._scale[:N_WHEELS]
         v_eval = max(speed, 1.0)
-        wheel_mu, wheel_lam = peaks(v_eval, p, thetas)
+        wheel_mu, wheel_lam = peaks(v_eval, p, thetas, near=self._last_peak_slips)
+        self._last_peak_slips = wheel_lam
         # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
-        _, jac = mu_and_jacobian_theta(wheel_lam, np.full(N_WHEELS, v_eval), thetas, p, ("theta",) + SHARED)
+        jac = np.empty((N_WHEELS, 4))
+        braking_mu_and_partials(wheel_lam, np.full(N_WHEELS, v_eval), thetas, p, jac)
         G = np.zeros((N_WHEELS, len(x)))
         G[np.arange(N_WHEELS), np.arange(N_WHEELS)] = jac[:, 0] * self._scale[0]
         G[:, N_WHEELS:] = jac[:, 1:] * self._scale[N_WHEELS:]
@@ -341,23 +376,30 @@ class LugreTrustRegionEstimator:
         w_sum = float(np.sum(weights))
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, float(r_data @ r_data) / dof)
-        # Parameters held at a bound are fixed there for the covariance: the unconstrained
-        # Gauss–Newton covariance would count spread into the infeasible side.
-        span = self._ub - self._lb
-        free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
-        cov = np.zeros((len(x), len(x)))
-        try:
-            Jf = J[:, free]
-            cov[np.ix_(free, free)] = np.linalg.inv(Jf.T @ Jf) * variance_factor
-        except np.linalg.LinAlgError:
-            cov[:] = np.inf
+        if self._cov is None or self._fits % o.excitation_every == 1 or o.excitation_every <= 1:
+            # Parameters held at a bound are fixed there for the covariance: the unconstrained
+            # Gauss–Newton covariance would count spread into the infeasible side. Like the
+            # excitation, it changes slowly: refreshed every few fits.
+            span = self._ub - self._lb
+            free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
+            cov = np.zeros((len(x), len(x)))
+            try:
+                Jf = J[:, free]
+                cov[np.ix_(free, free)] = np.linalg.inv(Jf.T @ Jf)
+            except np.linalg.LinAlgError:
+                cov[:] = np.inf
+            self._cov_unit = cov
+        cov = self._cov_unit * variance_factor
         self._cov = cov
         g_mean = G.mean(axis=0)
         mu_max = float(np.mean(wheel_mu))
         mu_std = math.sqrt(max(float(g_mean @ cov @ g_mean), 0.0))
         wheel_std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, cov, G), 0.0))
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
-        excitation = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam)
+        # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
+        if self._fits % o.excitation_every == 1 or o.excitation_every <= 1 or self._excitation_cache is None:
+            self._excitation_cache = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam)
+        excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = float(np.mean(thetas))
         slip_star = float(np.mean(wheel_lam))
@@ -374,7 +416,12 @@ class LugreTrustRegionEstimator:
         elif excitation > 0:
             status = Status.CONVERGING
         else:
-            return self._hold(now_s, speed, fitted=(mu_max, slip_star, theta_mean, tuple(map(float, wheel_mu))))
+            if now_s - self._last_excited_s > o.excitation_hold_s or self._last_valid is None:
+                # Braking goes on but the data no longer show the peak (a new road, or ABS
+                # backing off): report the fit, not trusted, rather than an old VALID.
+                return FrictionEstimate(now_s, Status.CONVERGING, mu_max, slip_star, theta_mean, 0.0,
+                                        tuple(float(m) for m in wheel_mu), mu_std, detail)
+            return self._hold(now_s, speed)
         estimate = FrictionEstimate(now_s, status, mu_max, slip_star, theta_mean, confidence,
                                     tuple(float(m) for m in wheel_mu), mu_std, detail)
         if status == Status.VALID:
@@ -387,8 +434,9 @@ class LugreTrustRegionEstimator:
         The Gauss–Newton covariance alone measures noise, not model mismatch, and measured
         against the simulator's truths it hardly predicts the error. Combined here: the delta-method
         spread (half weight), the drift of μ_max over the last `drift_window_s` (an estimate still
-        moving is not settled), a floor for model mismatch, the excitation, and a ramp over the
-        first `settle_s` of excitation (the first fits after onset are the worst).
+        moving is not settled), a floor for model mismatch, the excitation, a ramp over the
+        first `settle_s` of excitation (the first fits after onset are the worst), and the bias of
+        the newest residuals (a road changing under the fit).
         """
         o = self.options
         history = self._mu_history
@@ -409,7 +457,10 @@ class LugreTrustRegionEstimator:
         # covariance along a flat shape direction (v_s, σ2) did not mean a wrong μ_max.
         spread2 = 0.25 * min(rel_std, 0.1) ** 2 + drift**2 + o.model_mismatch**2
         ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
-        confidence = excitation * ramp * math.exp(-0.5 * spread2 / o.confidence_tolerance**2)
+        # Newest residuals biased beyond the noise: the road may be changing under the fit.
+        excess = max(0.0, self._innovation_score - o.jump_threshold)
+        innovation = math.exp(-excess * excess / 8.0)
+        confidence = excitation * ramp * innovation * math.exp(-0.5 * spread2 / o.confidence_tolerance**2)
         return confidence if math.isfinite(confidence) else 0.0
 
     def _axle_scale(self, wheel: int) -> float:
@@ -453,7 +504,9 @@ class LugreTrustRegionEstimator:
             secant slope — the μ–slip relation has flattened, which a linear region never does.
         """
         o = self.options
-        recent = weights > math.exp(-1.5)
+        # Only the newest ABS cycles count: after a change of road the older samples describe
+        # the old one.
+        recent = weights > math.exp(-o.excitation_window_s / o.forgetting_time_constant)
         best = 0.0
         for i in range(N_WHEELS):
             sel = recent & (wheel == i)
@@ -483,6 +536,8 @@ class LugreTrustRegionEstimator:
             bending = (a + 2 * b * lam_hi) / secant
             if bending > 0.5:
                 continue
+            if float(wheel_lam[i]) >= 0.9 * MAX_MODEL_SLIP:
+                continue  # the fitted curve has no peak short of lock: nothing identified
             mu_hi = float(np.partition(mu, k_hi)[k_hi])
             if mu_hi > o.max_peak_secant * lam_hi:
                 # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness

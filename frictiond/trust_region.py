@@ -93,12 +93,14 @@ def solve(
     xtol: float = 1e-8,
     gtol: float = 1e-8,
     initial: tuple[np.ndarray, np.ndarray] | None = None,
+    max_rejections: int = 60,
 ) -> TrustRegionResult:
     """Bounded nonlinear least squares; `fun(x)` returns the residuals and their Jacobian.
 
     Tolerances have `least_squares`' meaning: stop when the relative cost reduction of a step is
     below `ftol`, the step is below `xtol·(xtol + ‖x‖)`, or the scaled gradient's max norm is below
-    `gtol`.
+    `gtol`. `max_rejections` bounds the radius reductions per iteration (a recursive caller
+    would rather continue on the next update than spend an unbounded time now).
     """
     lb = np.asarray(lb, dtype=float)
     ub = np.asarray(ub, dtype=float)
@@ -128,7 +130,7 @@ def solve(
         eig = (w, Q, Q.T @ g_h)
         iterations += 1
         # Inner loop: shrink the radius until a step decreases the cost.
-        for _attempt in range(60):
+        for _attempt in range(max_rejections):
             s_h = _subproblem(eig, radius)
             s = d * s_h
             # Stay strictly inside the box: a component that would cross its bound goes a

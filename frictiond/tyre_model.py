@@ -189,24 +189,53 @@ def braking_mu_and_partials(lam: np.ndarray, v: np.ndarray, theta: np.ndarray, p
 
 # Peak search: a fixed slip grid, then a fine grid around the best point and a parabola
 # through the three best fine points. Vectorised over several θ (one per wheel).
-_PEAK_GRID = np.geomspace(2e-3, MAX_MODEL_SLIP, 64)
-_FINE = np.linspace(-1.0, 1.0, 25)
+_PEAK_GRID = np.geomspace(2e-3, MAX_MODEL_SLIP, 48)
+_FINE = np.linspace(-1.0, 1.0, 21)
+_THREE = np.array([-1.0, 0.0, 1.0])
 
 
-def peaks(speed_mps: float, p: LugreParams, thetas) -> tuple[np.ndarray, np.ndarray]:
-    """(μ_max, λ*) at one vehicle speed for each θ in `thetas` (other parameters from `p`)."""
+def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarray, np.ndarray]:
+    """(μ_max, λ*) at one vehicle speed for each θ in `thetas` (other parameters from `p`).
+
+    `near` (previous λ* per θ) skips the coarse search when the peak is still inside a ±25 %
+    bracket around it — the usual case for a recursive caller whose fit moves a little per update.
+    """
     thetas = np.atleast_1d(np.asarray(thetas, dtype=float))[:, None]
-    grid = _PEAK_GRID[None, :]
     v = float(speed_mps)
+    if near is not None:
+        # Two parabolic steps through three points around the previous peak; accept when the
+        # middle point is the highest (the peak is bracketed) and the step has become small.
+        lam = np.clip(np.asarray(near, dtype=float), 2e-3, 0.9 * MAX_MODEL_SLIP)
+        for h_rel in (0.08, 0.02):
+            h = (h_rel * lam)[:, None]
+            pts = lam[:, None] + h * _THREE[None, :]
+            fv = _mu_grid(pts, v, thetas, p)
+            y0, y1, y2 = fv[:, 0], fv[:, 1], fv[:, 2]
+            denom = y0 - 2 * y1 + y2
+            if not np.all((denom < 0) & (y1 >= y0) & (y1 >= y2)):
+                break
+            lam = lam + 0.5 * (y0 - y2) / denom * h[:, 0]
+        else:
+            mu_star = _mu_grid(lam[:, None], v, thetas, p)[:, 0]
+            return mu_star, lam
+    grid = _PEAK_GRID[None, :]
     values = _mu_grid(grid, v, thetas, p)
-    i = np.argmax(values, axis=1)
+    # The tyre's peak is the first local maximum: with a large viscous term σ2·λ·v the curve
+    # can dip after it and climb again towards lock, which is not a grip the road offers.
+    falling = np.diff(values, axis=1) < 0
+    i = np.where(falling.any(axis=1), np.argmax(falling, axis=1), len(_PEAK_GRID) - 1)
     lo = _PEAK_GRID[np.maximum(i - 1, 0)]
     hi = _PEAK_GRID[np.minimum(i + 1, len(_PEAK_GRID) - 1)]
     centre = _PEAK_GRID[i]
     half = np.maximum(centre - lo, hi - centre)[:, None]
     fine = np.clip(centre[:, None] + half * _FINE[None, :], 1e-4, MAX_MODEL_SLIP)
     fv = _mu_grid(fine, v, thetas, p)
-    j = np.clip(np.argmax(fv, axis=1), 1, len(_FINE) - 2)
+    return _refine(fine, fv, np.argmax(fv, axis=1), v, thetas, p)
+
+
+def _refine(fine, fv, j, v, thetas, p) -> tuple[np.ndarray, np.ndarray]:
+    """Parabola through the best fine-grid point and its neighbours."""
+    j = np.clip(j, 1, fine.shape[1] - 2)
     rows = np.arange(len(j))
     y0, y1, y2 = fv[rows, j - 1], fv[rows, j], fv[rows, j + 1]
     x1 = fine[rows, j]
@@ -223,14 +252,14 @@ def peaks(speed_mps: float, p: LugreParams, thetas) -> tuple[np.ndarray, np.ndar
 
 
 def _mu_grid(lam: np.ndarray, v: float, thetas: np.ndarray, p: LugreParams) -> np.ndarray:
-    g, _, _ = _stribeck(lam * v, p)
-    Z = thetas * p.sigma0 * p.patch_length * lam / (g * (1.0 - lam))
-    F, _ = _F_and_dF(Z)
-    return (g / thetas) * F + p.sigma2 * lam * v
+    """μ on a slip grid (lean: used only by the peak search, where Z is never tiny)."""
+    g = p.mu_c + (p.mu_s - p.mu_c) * np.exp(-((lam * (v / p.v_s)) ** p.alpha))
+    Z = np.maximum((thetas * (p.sigma0 * p.patch_length)) * lam / (g * (1.0 - lam)), _SMALL_Z)
+    return (g / thetas) * (1.0 + np.expm1(-Z) / Z) + (p.sigma2 * v) * lam
 
 
 def peak(speed_mps: float, p: LugreParams) -> tuple[float, float]:
-    """(μ_max, λ*) at one vehicle speed: the maximum of μ(λ, v) over braking slip."""
+    """(μ_max, λ*) at one vehicle speed: the first maximum of μ(λ, v) over braking slip."""
     m, lam = peaks(speed_mps, p, [p.theta])
     return float(m[0]), float(lam[0])
 

@@ -54,9 +54,12 @@ def test_peak_matches_dense_search(theta, speed):
     p = P0.with_values(theta=theta)
     lam = np.linspace(1e-4, tm.MAX_MODEL_SLIP, 400_001)
     values = tm.mu(lam, speed, p)
+    # The tyre's peak is the first local maximum (the viscous term may climb again near lock).
+    falling = np.nonzero(np.diff(values) < 0)[0]
+    k = falling[0] if len(falling) else len(values) - 1
     mu_max, lam_star = tm.peak(speed, p)
-    assert mu_max == pytest.approx(values.max(), rel=1e-7)
-    assert lam_star == pytest.approx(lam[values.argmax()], abs=2e-4)
+    assert mu_max == pytest.approx(values[k], rel=1e-7)
+    assert lam_star == pytest.approx(lam[k], abs=2e-4)
 
 
 def test_peak_falls_with_theta_and_moves_with_speed():

@@ -55,14 +55,18 @@ def test_recovers_peak_of_its_own_model(theta):
     assert last.mu_max == pytest.approx(mu_true, rel=0.05)
 
 
-def test_low_slip_braking_is_never_valid():
-    # Moderate braking: slips at a fifth of the peak never reveal it, whatever the noise does.
+def test_low_slip_braking_never_claims_a_wrong_peak():
+    # Moderate braking at a fifth of the peak slip: at speed the curve is still near-linear there
+    # and nothing may be VALID; at walking pace LuGre's flat top is already at ~90 % of μ_max,
+    # where a VALID estimate is allowed — but only an accurate one.
     p = tm.LugreParams(theta=1.3)
     curve = lugre_curve(p)
     est = LugreTrustRegionEstimator()
-    _, _, statuses = run(est, braking(lambda t, i: curve, slip_scale=0.2, seed=2), lambda s: 0.0)
-    assert Status.VALID not in statuses
-    assert statuses[-1] == Status.NOT_EXCITED
+    for s in braking(lambda t, i: curve, slip_scale=0.2, seed=2):
+        e = est.update(s)
+        if e.status == Status.VALID:
+            assert s.speed_mps < 10.0
+            assert e.mu_max == pytest.approx(tm.peak(s.speed_mps, p)[0], rel=0.1)
 
 
 def test_split_mu_shows_per_wheel():

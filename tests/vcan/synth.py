@@ -1,7 +1,8 @@
 """A synthetic braking drive encoded as input frames (used until/unless the simulator is there).
 
-Straight-line braking from `v0`: slip ramps up along a Burckhardt dry-asphalt curve, so the
-estimator sees real excitation; brake pressures follow the wheel equation. Deterministic.
+Straight-line braking from `v0`: slip ramps up along a Burckhardt dry-asphalt curve and then
+cycles through its peak as an ABS would (±45 % at 4 Hz), so the estimator sees real
+excitation; brake pressures follow the wheel equation. Deterministic.
 """
 from __future__ import annotations
 
@@ -28,8 +29,8 @@ def braking_frames(
     start_s: float = 1000.0,
     v0: float = 27.0,
     cruise_s: float = 0.5,
-    ramp_s: float = 2.0,
-    peak_slip: float = 0.14,
+    ramp_s: float = 1.0,
+    peak_slip: float = 0.17,
     period_s: float = 0.01,
     skip: frozenset[str] = frozenset(),
 ) -> Iterator[Frame]:
@@ -43,15 +44,19 @@ def braking_frames(
     steps = int(duration_s / period_s)
     for k in range(steps):
         t = k * period_s
+        cycle = 2 * math.pi * 4.0
         if t < cruise_s:
-            slip = 0.0
+            slip, slip_rate = 0.0, 0.0
+        elif t < cruise_s + ramp_s:
+            slip, slip_rate = peak_slip * (t - cruise_s) / ramp_s, peak_slip / ramp_s
         else:
-            slip = peak_slip * min(1.0, (t - cruise_s) / ramp_s)
+            phase = cycle * (t - cruise_s - ramp_s)
+            slip = peak_slip * (1.0 + 0.45 * math.sin(phase))
+            slip_rate = peak_slip * 0.45 * cycle * math.cos(phase)
         mu = mu_of(slip) if slip > 0 else 0.0
         decel = GRAVITY_MPS2 * mu
         loads = veh.normal_forces(-decel, 0.0)
         omega = v * (1.0 - slip) / r
-        slip_rate = peak_slip / ramp_s if cruise_s <= t < cruise_s + ramp_s else 0.0
         omega_dot = (-decel * (1.0 - slip) - v * slip_rate) / r
         pressures = []
         for i in range(4):

@@ -1,0 +1,104 @@
+"""Accuracy regression: the benchmark's metrics per scenario, pinned with a margin.
+
+Seed 0 of every case in `benchmarks/accuracy.py`, through the full pipeline (frames encoded with
+the default DBC). Limits are the achieved figures with a margin, never looser than issue 3's
+targets where the estimator meets them: MAE ≤ 0.05 and ≤ 12 %, VALID ≥ 80 % of the evaluated
+span, converged within 0.3 s, re-converged within 0.5 s after a μ jump, false VALID ≤ 1 %.
+"""
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import math
+import statistics
+
+import pytest
+
+from frictiond.config import default_config_path, load_config
+from frictiond.evaluation import evaluate
+from frictiond.pipeline import Pipeline
+from frictiond.replay import ReplayRecorder, replay_frames
+from frictiond.sim_frames import simulate_frames
+
+from .conftest import REPO
+
+_spec = importlib.util.spec_from_file_location("accuracy_bench", REPO / "benchmarks" / "accuracy.py")
+_bench = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_bench)
+CASES = {c[0]: c[1:] for c in _bench.CASES}
+
+# case: (max MAE, max relative MAE, min VALID share, max convergence s, max re-convergence s)
+LIMITS = {
+    "dry": (0.03, 0.035, 0.95, 0.3, None),
+    "dry/burckhardt": (0.03, 0.035, 0.9, 0.3, None),
+    "dry/ref": (0.03, 0.035, 0.95, 0.3, None),
+    "wet": (0.035, 0.06, 0.95, 0.3, None),
+    "wet/mf": (0.025, 0.035, 0.95, 0.3, None),
+    "wet/ref": (0.035, 0.065, 0.95, 0.3, None),
+    "snow": (0.005, 0.02, 0.95, 0.3, None),
+    "snow/burckhardt": (0.005, 0.02, 0.95, 0.3, None),
+    "cobblestone_wet": (0.045, 0.11, 0.95, 0.3, None),
+    "dry_to_wet": (0.03, 0.05, 0.9, 0.3, 0.5),
+    "dry_to_wet/mf": (0.035, 0.045, 0.9, 0.3, None),
+    "split_mu": (0.015, 0.04, 0.95, 0.3, None),
+    "noisy": (0.015, 0.025, 0.95, 0.3, None),
+    "noisy/ref": (0.02, 0.03, 0.95, 0.3, None),
+    "cornering": (0.015, 0.02, 0.95, 0.3, None),
+}
+BASE = load_config(default_config_path())
+
+
+def run_case(label: str, kind: str):
+    scenario, model, ref = CASES[label]
+    config = dataclasses.replace(BASE, estimator=dataclasses.replace(BASE.estimator, kind=kind))
+    frames, sim = simulate_frames(config, scenario, seed=0, truth_model=model, reference_speed=ref)
+    recorder = ReplayRecorder()
+    replay_frames(Pipeline(config), frames, None, recorder)
+    return evaluate(recorder.estimates, sim.truth.rows())
+
+
+@pytest.fixture(scope="module")
+def reports():
+    return {(label, kind): run_case(label, kind) for label in CASES for kind in ("lugre-tr", "burckhardt-rls")}
+
+
+@pytest.mark.parametrize("label", sorted(LIMITS))
+def test_lugre_accuracy_is_pinned(reports, label):
+    r = reports[(label, "lugre-tr")]
+    mae, mae_rel, valid, conv, reconv = LIMITS[label]
+    assert r.mae <= mae, f"MAE {r.mae:.4f}"
+    assert r.mae_rel <= mae_rel, f"relative MAE {r.mae_rel:.4f}"
+    assert r.valid_share >= valid, f"VALID share {r.valid_share:.3f}"
+    assert r.convergence_s <= conv, f"convergence {r.convergence_s:.3f} s"
+    if reconv is not None:
+        assert r.reconvergence_s is not None and r.reconvergence_s <= reconv, f"re-convergence {r.reconvergence_s}"
+    assert r.false_valid_count <= 0.02 * max(r.valid_count, 1), f"false VALID {r.false_valid_count}/{r.valid_count}"
+
+
+def test_moderate_braking_never_claims_valid(reports):
+    # The peak is never approached: no VALID at all (so no wrong one).
+    assert reports[("moderate", "lugre-tr")].valid_count == 0
+
+
+def test_ice_is_honest(reports):
+    # Ice with the peak at ~2.4 % slip and no ground-speed sensor: slip is not measured well
+    # enough to find the peak. The estimator must say so rather than guess.
+    r = reports[("ice", "lugre-tr")]
+    assert r.false_valid_count == 0
+    r = reports[("ice/mf", "lugre-tr")]
+    assert r.mae_rel <= 0.15 and r.false_valid_count <= 0.04 * r.valid_count
+
+
+def test_false_valid_overall_and_lugre_beats_baseline(reports):
+    lugre = [reports[(c, "lugre-tr")] for c in CASES]
+    false_valid = sum(r.false_valid_count for r in lugre)
+    valid = sum(r.valid_count for r in lugre)
+    assert false_valid <= 0.01 * valid, f"false VALID {false_valid}/{valid}"
+    scored = [c for c in CASES if math.isfinite(reports[(c, "lugre-tr")].mae) and math.isfinite(reports[(c, "burckhardt-rls")].mae)]
+    mean_lugre = statistics.mean(reports[(c, "lugre-tr")].mae for c in scored)
+    mean_rls = statistics.mean(reports[(c, "burckhardt-rls")].mae for c in scored)
+    assert mean_lugre < 0.8 * mean_rls, f"lugre {mean_lugre:.4f} vs rls {mean_rls:.4f}"
+    # ... including the cases whose truth is the baseline's own model (Burckhardt).
+    burckhardt_cases = ["wet", "wet/ref", "snow/burckhardt", "dry/burckhardt"]
+    assert statistics.mean(reports[(c, "lugre-tr")].mae for c in burckhardt_cases) < statistics.mean(
+        reports[(c, "burckhardt-rls")].mae for c in burckhardt_cases)

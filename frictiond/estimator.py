@@ -57,9 +57,9 @@ class LugreTROptions:
     prior_v_s: float = 6.57
     prior_sigma2: float = 0.0018
     prior_std_theta: float = 3.0
-    prior_std_sigma0: float = 120.0
-    prior_std_v_s: float = 5.0
-    prior_std_sigma2: float = 0.004
+    prior_std_sigma0: float = 60.0
+    prior_std_v_s: float = 3.0
+    prior_std_sigma2: float = 0.003
     front_rear_coupling: float = 0.08     # relative std of θ_front − θ_rear on one side
     left_right_coupling: float = 0.6      # relative std of θ_left − θ_right (split-μ allowed)
     # Bounds of the free parameters.
@@ -70,7 +70,7 @@ class LugreTROptions:
     v_s_min: float = 0.3
     v_s_max: float = 60.0
     sigma2_min: float = 0.0
-    sigma2_max: float = 0.03
+    sigma2_max: float = 0.015
     # Held parameters.
     mu_c: float = 0.8
     mu_s: float = 1.55
@@ -85,6 +85,9 @@ class LugreTROptions:
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
+    excitation_fit_ratio: float = 0.92    # ... or reach this fraction of the fitted μ_max
+    peak_extrapolation: float = 1.6       # μ_max is not read beyond this multiple of the slips seen
+    min_utilisation: float = 0.8          # measured μ (90 % quantile) must reach this share of μ_max
     valid_confidence: float = 0.5
     confidence_tolerance: float = 0.06    # relative μ_max uncertainty at which confidence = e^(−½)
     model_mismatch: float = 0.03          # relative floor of the uncertainty (the road is not LuGre)
@@ -205,9 +208,12 @@ class LugreTrustRegionEstimator:
         self._axle_balance = 0.0
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
+        self.excitation_reasons = ["", "", "", ""]
         self._innovation_score = 0.0
         self._last_jump_s = -math.inf
         self._last_peak_slips: np.ndarray | None = None
+        self._slip_support: np.ndarray | None = None
+        self._capped: np.ndarray | None = None
         self._excited_since_s = math.inf
         self._last_update_s: float | None = None
         self._cov: np.ndarray | None = None
@@ -366,6 +372,19 @@ class LugreTrustRegionEstimator:
         v_eval = max(speed, 1.0)
         wheel_mu, wheel_lam = peaks(v_eval, p, thetas, near=self._last_peak_slips)
         self._last_peak_slips = wheel_lam
+        # Do not extrapolate far beyond the data: when the fitted curve keeps rising past
+        # `peak_extrapolation`× the slips actually seen (a monotone fit of a flat-topped road),
+        # μ_max is read at that slip instead of at a "peak" near lock.
+        if self._fits % o.excitation_every == 1 or self._slip_support is None:
+            self._slip_support = self._high_slips(slip, wheel, weights)
+        cap = self._slip_support * o.peak_extrapolation
+        beyond = wheel_lam > cap
+        self._capped = beyond
+        if beyond.any():
+            capped = np.empty((N_WHEELS, 4))
+            mu_cap = braking_mu_and_partials(cap, np.full(N_WHEELS, v_eval), thetas, p, capped)
+            wheel_mu = np.where(beyond, np.minimum(mu_cap, wheel_mu), wheel_mu)
+            wheel_lam = np.where(beyond, cap, wheel_lam)
         # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
         jac = np.empty((N_WHEELS, 4))
         braking_mu_and_partials(wheel_lam, np.full(N_WHEELS, v_eval), thetas, p, jac)
@@ -398,7 +417,7 @@ class LugreTrustRegionEstimator:
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
         if self._fits % o.excitation_every == 1 or o.excitation_every <= 1 or self._excitation_cache is None:
-            self._excitation_cache = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam)
+            self._excitation_cache = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, v_eval)
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = float(np.mean(thetas))
@@ -492,7 +511,25 @@ class LugreTrustRegionEstimator:
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
         self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
 
-    def _excitation(self, slip, mu_meas, wheel, weights, wheel_mu, wheel_lam) -> float:
+    def _high_slips(self, slip, wheel, weights) -> np.ndarray:
+        """The high end (90 %) of each wheel's recent slips (∞ for a wheel without data)."""
+        o = self.options
+        recent = weights > math.exp(-o.excitation_window_s / o.forgetting_time_constant)
+        out = np.full(N_WHEELS, np.inf)
+        for i in range(N_WHEELS):
+            sel = slip[recent & (wheel == i)]
+            if len(sel) >= 10:
+                out[i] = float(np.quantile(sel, 0.9))
+        return out
+
+    def _fit_at_high_slip(self, speed: float) -> np.ndarray:
+        """The fitted μ of each wheel at the high end of its recent slips."""
+        lam_hi = np.where(np.isfinite(self._slip_support), self._slip_support, 1e-3)
+        thetas = self._x[:N_WHEELS] * self._scale[:N_WHEELS]
+        return braking_mu_and_partials(lam_hi, np.full(N_WHEELS, max(speed, 1.0)), thetas,
+                                       self._params(self._x), np.empty((N_WHEELS, 4)))
+
+    def _excitation(self, slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, speed: float = 10.0) -> float:
         """0 unless some wheel's recent data show the peak; rises to 1 as they reach it.
 
         Two independent pieces of evidence must agree, so that the fit cannot talk itself into
@@ -508,10 +545,13 @@ class LugreTrustRegionEstimator:
         # the old one.
         recent = weights > math.exp(-o.excitation_window_s / o.forgetting_time_constant)
         best = 0.0
+        why = self.excitation_reasons = ["", "", "", ""]
+        fit_at_hi = self._fit_at_high_slip(speed)
         for i in range(N_WHEELS):
             sel = recent & (wheel == i)
             n = int(np.count_nonzero(sel))
             if n < 10:
+                why[i] = "few samples"
                 continue
             lam = slip[sel]
             mu = mu_meas[sel]
@@ -522,29 +562,53 @@ class LugreTrustRegionEstimator:
             if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
                 # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
                 # ice): the shape of the curve near its peak is not observed.
+                why[i] = "no slip spread"
                 continue
             s2, s3, s4 = float(lam @ lam), float(lam @ (lam * lam)), float((lam * lam) @ (lam * lam))
             y1, y2 = float(lam @ mu), float((lam * lam) @ mu)
             det = s2 * s4 - s3 * s3
             if det <= 1e-18 * max(s2 * s4, 1e-300):
+                why[i] = "degenerate"
                 continue
             a = (y1 * s4 - y2 * s3) / det
             b = (s2 * y2 - s3 * y1) / det
             secant = a + b * lam_hi
             if secant <= 0:
+                why[i] = "negative secant"
                 continue
             bending = (a + 2 * b * lam_hi) / secant
             if bending > 0.5:
+                why[i] = f"not bending ({bending:.2f})"
                 continue
-            if float(wheel_lam[i]) >= 0.9 * MAX_MODEL_SLIP:
-                continue  # the fitted curve has no peak short of lock: nothing identified
             mu_hi = float(np.partition(mu, k_hi)[k_hi])
             if mu_hi > o.max_peak_secant * lam_hi:
                 # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
                 # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
+                why[i] = "steep secant"
                 continue
-            proximity = max(lam_hi / float(wheel_lam[i]),
-                            mu_hi / float(wheel_mu[i]) * o.excitation_slip_ratio / o.excitation_mu_ratio)
+            # How close to the fitted peak the data came: in slip, in measured μ, and in the
+            # fitted curve's own height at the data's high slip (on a flat-topped road the
+            # peak slip is ill-defined but μ_max is not: the curve is already at its plateau).
+            fit_ratio = float(fit_at_hi[i]) / max(float(wheel_mu[i]), 1e-6)
+            by_plateau = o.excitation_slip_ratio + (fit_ratio - o.excitation_fit_ratio) / (
+                1.0 - o.excitation_fit_ratio) * (1.0 - o.excitation_slip_ratio)
+            if self._capped is not None and self._capped[i]:
+                # μ_max was read at the extrapolation limit, not at a peak: only a plateau
+                # (the fitted curve already flat where the data are) counts as evidence.
+                proximity = by_plateau
+            else:
+                proximity = max(lam_hi / float(wheel_lam[i]),
+                                mu_hi / float(wheel_mu[i]) * o.excitation_slip_ratio / o.excitation_mu_ratio,
+                                by_plateau)
+            if mu_hi < o.min_utilisation * float(wheel_mu[i]):
+                # The measured utilisation never came near the claimed peak: whatever the fit
+                # says beyond the data is extrapolation.
+                why[i] = "low utilisation"
+                continue
+            if float(wheel_lam[i]) >= 0.9 * MAX_MODEL_SLIP and fit_ratio < o.excitation_fit_ratio:  # (uncapped)
+                why[i] = "no peak"
+                continue  # no peak short of lock, and the data far below the fitted maximum
+            why[i] = f"proximity {proximity:.2f}"
             best = max(best, proximity)
         if best < o.excitation_slip_ratio:
             return 0.0

@@ -48,18 +48,19 @@ class FrontEndOptions:
     derivative_window: int = 7            # wheel-speed samples in the local quadratic fit (odd)
     min_speed: float = 3.0                # m/s; below it slip is ill-conditioned
     max_slip: float = 0.6                 # samples beyond it (near lock) are not used
-    min_brake_pressure: float = 3.0       # bar above push-out for a wheel to count as braked
+    min_brake_pressure: float = 1.0       # bar above push-out for a wheel to count as braked
     stale_periods: float = 3.0            # an input older than this many periods is stale
     default_period: float = 0.01          # s, when the DBC gives no cycle time
     spike_threshold: float = 2.0          # rad/s deviation from the local fit that marks a glitch
     max_gap: float = 0.25                 # s between wheel-speed frames before the filter restarts
     speed_gain_up: float = 0.3            # observer gain when wheels read faster than the estimate
-    speed_gain_down: float = 0.004        # ... and when they read slower (braked wheels slip)
+    speed_gain_down: float = 0.002        # ... and when they read slower (braked wheels slip)
+    min_braked_slip: float = 0.15         # under ABS the least-braked wheel slips less than this
     speed_gain_free_rolling: float = 0.15
     accel_bias_time_constant: float = 3.0   # s, accelerometer offset learning while free rolling
     brake_gain_correction: bool = True
     brake_gain_time_constant: float = 0.7   # s
-    brake_gain_min_decel: float = 1.5       # m/s^2 of deceleration before the body equation is used
+    brake_gain_min_decel: float = 0.25       # m/s^2 of deceleration before the body equation is used
     brake_gain_limits: float = 0.35         # correction stays within 1 ± this
 
 
@@ -350,9 +351,14 @@ class FrontEnd:
             elif fastest > v:
                 v += opts.speed_gain_up * (fastest - v)
             else:
-                # Braked wheels all read low during ABS; lean on them only weakly, so an
-                # accelerometer offset cannot make the estimate drift without bound.
-                v += opts.speed_gain_down * (fastest - v)
+                # Braked wheels all read low during ABS: even the least-braked one slips by
+                # several percent, so pulling towards the fastest wheel biases the speed (and
+                # every slip) low. Pull only when the estimate would put even the fastest wheel
+                # beyond any ABS slip, and weakly: enough that an accelerometer offset cannot
+                # make the estimate drift up without bound.
+                ceiling = fastest / (1.0 - opts.min_braked_slip)
+                if v > ceiling:
+                    v += opts.speed_gain_down * (ceiling - v)
         v = min(max(v, 0.0), MAX_SPEED_MPS)
         self._speed_estimate_mps = v
         return v, False

@@ -29,21 +29,22 @@ CASES = {c[0]: c[1:] for c in _bench.CASES}
 
 # case: (max MAE, max relative MAE, min VALID share, max convergence s, max re-convergence s)
 LIMITS = {
-    "dry": (0.03, 0.035, 0.95, 0.3, None),
-    "dry/burckhardt": (0.03, 0.035, 0.9, 0.3, None),
-    "dry/ref": (0.03, 0.035, 0.95, 0.3, None),
-    "wet": (0.035, 0.06, 0.95, 0.3, None),
-    "wet/mf": (0.025, 0.035, 0.95, 0.3, None),
-    "wet/ref": (0.035, 0.065, 0.95, 0.3, None),
-    "snow": (0.005, 0.02, 0.95, 0.3, None),
-    "snow/burckhardt": (0.005, 0.02, 0.95, 0.3, None),
-    "cobblestone_wet": (0.045, 0.11, 0.95, 0.3, None),
-    "dry_to_wet": (0.03, 0.05, 0.9, 0.3, 0.5),
-    "dry_to_wet/mf": (0.035, 0.045, 0.9, 0.3, None),
-    "split_mu": (0.015, 0.04, 0.95, 0.3, None),
+    "dry": (0.035, 0.04, 0.95, 0.3, None),
+    "dry/burckhardt": (0.03, 0.035, 0.93, 0.3, None),
+    "dry/ref": (0.035, 0.04, 0.95, 0.3, None),
+    "wet": (0.03, 0.05, 0.95, 0.3, None),
+    "wet/mf": (0.025, 0.03, 0.95, 0.3, None),
+    "wet/ref": (0.035, 0.06, 0.95, 0.3, None),
+    "snow": (0.012, 0.05, 0.95, 0.3, None),
+    "snow/burckhardt": (0.008, 0.04, 0.95, 0.3, None),
+    # Rough road: the ABS keeps ~15 % below the peak, so less of the stop shows it.
+    "cobblestone_wet": (0.015, 0.03, 0.65, 0.3, None),
+    "dry_to_wet": (0.02, 0.03, 0.85, 0.3, 0.5),
+    "dry_to_wet/mf": (0.05, 0.065, 0.9, 0.3, None),
+    "split_mu": (0.01, 0.025, 0.95, 0.3, None),
     "noisy": (0.015, 0.025, 0.95, 0.3, None),
     "noisy/ref": (0.02, 0.03, 0.95, 0.3, None),
-    "cornering": (0.015, 0.02, 0.95, 0.3, None),
+    "cornering": (0.025, 0.025, 0.95, 0.3, None),
 }
 BASE = load_config(default_config_path())
 
@@ -87,6 +88,7 @@ def test_ice_is_honest(reports):
     assert r.false_valid_count == 0
     r = reports[("ice/mf", "lugre-tr")]
     assert r.mae_rel <= 0.15 and r.false_valid_count <= 0.04 * r.valid_count
+    assert reports[("ice", "lugre-tr")].valid_count == 0
 
 
 def test_false_valid_overall_and_lugre_beats_baseline(reports):

@@ -1,0 +1,88 @@
+"""Latency inside the daemon's own loop: a WHEEL_SPEEDS frame handed over by the bus → its output
+frames handed to the bus, for `frictiond run`'s Daemon on python-can's virtual bus.
+
+Simulated ABS stops are played onto the bus at real-time pace (so the loop is idle between
+frames as on a car), and every trigger frame's handling time is recorded. As a floor, the same
+measurement for a loop that only decodes the frame with the codec.
+
+    python benchmarks/latency.py [--scenarios dry,wet,snow] [--pace 1.0]
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import default_config, percentile  # noqa: E402
+
+from frictiond.busio import frame_to_message, open_bus  # noqa: E402
+from frictiond.daemon import Daemon, Overrides  # noqa: E402
+from frictiond.sim_frames import simulate_frames  # noqa: E402
+
+
+class TimedDaemon(Daemon):
+    """The real daemon, with a stopwatch around the handling of each trigger frame."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.latencies: list[float] = []
+        self.decode_only: list[float] = []
+
+    def _handle(self, msg):  # type: ignore[override]
+        if msg.arbitration_id != self.trigger_id:
+            return super()._handle(msg)
+        t0 = time.perf_counter()
+        super()._handle(msg)
+        self.latencies.append(time.perf_counter() - t0)
+        # floor: what merely decoding this frame costs
+        from frictiond.busio import message_to_frame
+
+        t0 = time.perf_counter()
+        self.pipeline.input_codec.decode(message_to_frame(msg))
+        self.decode_only.append(time.perf_counter() - t0)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenarios", default="dry,wet,snow")
+    parser.add_argument("--pace", type=float, default=1.0, help="playback speed (1 = real time)")
+    args = parser.parse_args(argv)
+    config = default_config()
+    channel = f"frictiond-bench-{uuid.uuid4().hex[:8]}"
+    daemon = TimedDaemon(config, overrides=Overrides(interface="virtual", channel=channel), install_signals=False)
+    thread = threading.Thread(target=daemon.run, daemon=True)
+    thread.start()
+    daemon.running.wait(10)
+    vehicle = open_bus("virtual", channel, None, preserve_timestamps=True)
+    try:
+        for k, name in enumerate(args.scenarios.split(",")):
+            frames, _ = simulate_frames(config, name, seed=k)
+            base, start = frames[0].time_s, time.perf_counter()
+            for f in frames:
+                delay = (f.time_s - base) / args.pace - (time.perf_counter() - start)
+                if delay > 0:
+                    time.sleep(delay)
+                vehicle.send(frame_to_message(f._replace(time_s=time.time())))
+            time.sleep(0.2)
+    finally:
+        daemon.request_stop()
+        thread.join(10)
+        vehicle.shutdown()
+    lat = [v * 1e6 for v in daemon.latencies]
+    dec = [v * 1e6 for v in daemon.decode_only]
+    print(f"trigger frames handled: {len(lat)}")
+    print(f"arrival → outputs sent: median {statistics.median(lat):7.1f} µs  p99 {percentile(lat, 99):7.1f} µs  "
+          f"max {max(lat):7.1f} µs")
+    print(f"floor (decode only):    median {statistics.median(dec):7.1f} µs  p99 {percentile(dec, 99):7.1f} µs")
+    print(f"ratio median latency / decode: {statistics.median(lat) / statistics.median(dec):.1f}x; "
+          f"p99 is {percentile(lat, 99) / 10_000 * 100:.1f} % of the 10 ms bus period")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

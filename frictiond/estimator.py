@@ -206,6 +206,7 @@ class LugreTrustRegionEstimator:
         self._fits = 0
         self._jumps = 0
         self._axle_balance = 0.0
+        self._last_sample_s = -math.inf
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
         self.excitation_reasons = ["", "", "", ""]
@@ -255,6 +256,15 @@ class LugreTrustRegionEstimator:
         o = self.options
         t = sample.time_s
         window = self._window
+        if not math.isfinite(t) or not math.isfinite(sample.speed_mps):
+            return self._hold(self._last_sample_s if math.isfinite(self._last_sample_s) else 0.0, 0.0)
+        if t < self._last_sample_s - 1e-3:
+            # The clock went backwards (log splice, clock step): the window's samples would get
+            # weights from the future. Start the window again; the fitted parameters stay.
+            window.clear()
+            self._mu_history.clear()
+            self._last_update_s = None
+        self._last_sample_s = t
         added = 0
         v = sample.speed_mps
         for i in range(N_WHEELS):
@@ -307,7 +317,7 @@ class LugreTrustRegionEstimator:
                            patch_length=self._base.patch_length)
 
     def _weights(self, now_s: float, times: np.ndarray) -> np.ndarray:
-        return np.exp((times - now_s) / self.options.forgetting_time_constant)
+        return np.exp(np.minimum(times - now_s, 0.0) / self.options.forgetting_time_constant)
 
     def _innovation(self, now_s: float, times: np.ndarray, r_data: np.ndarray, weights: np.ndarray) -> float:
         """How far the newest samples' mean residual sits from zero, in standard errors.

@@ -53,9 +53,11 @@ class FrontEndOptions:
     default_period: float = 0.01          # s, when the DBC gives no cycle time
     spike_threshold: float = 2.0          # rad/s deviation from the local fit that marks a glitch
     max_gap: float = 0.25                 # s between wheel-speed frames before the filter restarts
+    reorder_window: float = 0.05          # s; an older wheel-speed frame within this is skipped, not a restart
     speed_gain_up: float = 0.3            # observer gain when wheels read faster than the estimate
-    speed_gain_down: float = 0.002        # ... and when they read slower (braked wheels slip)
+    speed_gain_down: float = 0.02         # ... and when even the fastest wheel reads too slow
     min_braked_slip: float = 0.15         # under ABS the least-braked wheel slips less than this
+    max_all_wheel_slip: float = 0.3       # ... and never all four wheels beyond this at once
     speed_gain_free_rolling: float = 0.15
     accel_bias_time_constant: float = 3.0   # s, accelerometer offset learning while free rolling
     brake_gain_correction: bool = True
@@ -162,6 +164,8 @@ class FrontEnd:
         self._accel_bias_mps2 = 0.0
         self._brake_gain_factor = 1.0
         self._last_trigger_s = -math.inf
+        self.skipped_triggers = 0
+        self._ref_disagreements = 0
 
     @property
     def brake_gain_factor(self) -> float:
@@ -191,6 +195,13 @@ class FrontEnd:
         history = self._history.get(message)
         if history is None:
             return None
+        if message == self.trigger_message:
+            dt = time_s - self._last_trigger_s
+            if -self.options.reorder_window < dt < 1e-4:
+                # A repeated or slightly out-of-order wheel-speed frame (gateways and log
+                # splices do this): skip it rather than restart the derivative filter.
+                self.skipped_triggers += 1
+                return None
         history.push(time_s, values)
         if message != self.trigger_message:
             return None
@@ -336,10 +347,10 @@ class FrontEnd:
         dt = 0.0 if self._speed_time_s is None else time_s - self._speed_time_s
         self._speed_time_s = time_s
         ref = self._value("vehicle_speed_ref", time_s) if self._has_ref_speed else None
-        if ref is not None and self._ref_fresh(time_s) and 0.0 <= ref <= MAX_SPEED_MPS:
+        fastest = max(wheel_linear)
+        if ref is not None and self._ref_fresh(time_s) and 0.0 <= ref <= MAX_SPEED_MPS and self._ref_plausible(ref, fastest):
             self._speed_estimate_mps = ref
             return ref, True
-        fastest = max(wheel_linear)
         mean = sum(wheel_linear) / 4.0
         v = self._speed_estimate_mps
         if v is None or dt <= 0.0 or dt > opts.max_gap:
@@ -349,19 +360,39 @@ class FrontEnd:
             if not wheels_loaded:
                 v += opts.speed_gain_free_rolling * (mean - v)
             elif fastest > v:
-                v += opts.speed_gain_up * (fastest - v)
+                # A wheel faster than the estimate pulls it up, but no faster than a car can
+                # gain speed: one corrupt wheel-speed frame must not carry it off.
+                v += min(opts.speed_gain_up * (fastest - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
             else:
                 # Braked wheels all read low during ABS: even the least-braked one slips by
                 # several percent, so pulling towards the fastest wheel biases the speed (and
                 # every slip) low. Pull only when the estimate would put even the fastest wheel
-                # beyond any ABS slip, and weakly: enough that an accelerometer offset cannot
-                # make the estimate drift up without bound.
+                # beyond what an ABS lets it slip: an accelerometer offset or a corrupt input
+                # cannot make the estimate drift up without bound.
                 ceiling = fastest / (1.0 - opts.min_braked_slip)
                 if v > ceiling:
                     v += opts.speed_gain_down * (ceiling - v)
         v = min(max(v, 0.0), MAX_SPEED_MPS)
         self._speed_estimate_mps = v
         return v, False
+
+    def _ref_plausible(self, ref: float, fastest_wheel: float) -> bool:
+        """A ground-speed reading the wheels and the recent estimate can agree with.
+
+        A braked wheel is slower than the ground, never much faster; and a single reading far
+        from the running estimate is a glitch unless the next ones say the same (then the
+        estimate was wrong and the sensor is followed again).
+        """
+        if ref + 1.0 < fastest_wheel * 0.95:
+            return False
+        if ref > fastest_wheel / (1.0 - self.options.max_all_wheel_slip) + 1.0 and fastest_wheel >= 0.5:
+            return False
+        v = self._speed_estimate_mps
+        if v is not None and abs(ref - v) > 1.0 + 0.1 * v:
+            self._ref_disagreements += 1
+            return self._ref_disagreements > 10
+        self._ref_disagreements = 0
+        return True
 
     def _ref_fresh(self, time_s: float) -> bool:
         message = self._signal_message["vehicle_speed_ref"]

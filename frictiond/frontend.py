@@ -58,12 +58,13 @@ class FrontEndOptions:
     speed_gain_down: float = 0.02         # ... and when even the fastest wheel reads too slow
     min_braked_slip: float = 0.15         # under ABS the least-braked wheel slips less than this
     max_all_wheel_slip: float = 0.3       # ... and never all four wheels beyond this at once
+    unexplained_decel: float = 3.0        # m/s^2 of deceleration that zero brake pressure cannot explain
     speed_gain_free_rolling: float = 0.15
     accel_bias_time_constant: float = 3.0   # s, accelerometer offset learning while free rolling
     brake_gain_correction: bool = True
-    brake_gain_time_constant: float = 0.7   # s
+    brake_gain_time_constant: float = 2.0   # s
     brake_gain_min_decel: float = 0.25       # m/s^2 of deceleration before the body equation is used
-    brake_gain_limits: float = 0.35         # correction stays within 1 ± this
+    brake_gain_limits: float = 0.25         # correction stays within 1 ± this
 
 
 @dataclass(slots=True)
@@ -166,6 +167,8 @@ class FrontEnd:
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
         self._ref_disagreements = 0
+        self._unexplained_s = 0.0
+        self._last_sample_time_s: float | None = None
 
     @property
     def brake_gain_factor(self) -> float:
@@ -285,6 +288,16 @@ class FrontEnd:
         driving = self._has_drive_torque and any(abs(d) > 20.0 for d in drive)
 
         accel_long = accel_long_raw - self._accel_bias_mps2
+        # Plausibility of the brake pressures against the body: a hard deceleration with no
+        # pressure anywhere (and no drive torque to explain it) means the pressure signals are
+        # wrong, and every brake torque computed from them would be too.
+        if not braking and not driving and accel_long < -opts.unexplained_decel:
+            self._unexplained_s += max(0.0, t_c - self._last_sample_time_s) if self._last_sample_time_s else 0.0
+        else:
+            self._unexplained_s = 0.0
+        self._last_sample_time_s = t_c
+        if self._unexplained_s > 0.1:
+            return FrontEndResult(None, stale, "brake pressure implausible")
         speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, braking or driving)
         if not braking and not driving:
             self._learn_accel_bias(t_c, omega_dot, accel_long_raw)

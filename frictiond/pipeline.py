@@ -6,7 +6,7 @@ same thing from the same frames.
 from __future__ import annotations
 
 import math
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -15,6 +15,11 @@ from .config import Config
 from .frames import Frame
 from .frontend import FrontEnd, FrontEndResult, make_front_end
 from .samples import FrictionEstimate, PhysicalSample, Status
+
+
+# This many repaired input faults within the window turn the status to FAULT.
+FAULTS_FOR_STATUS = 15
+FAULT_WINDOW_S = 0.5
 
 
 def make_estimator(config: Config) -> Any:
@@ -70,6 +75,7 @@ class Pipeline:
         self._last_output_s = -math.inf
         self._last_trigger_s = -math.inf
         self._wheel_divider = max(1, int(config.output.wheel_divider))
+        self._recent_faults: deque[float] = deque()
 
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame) -> list[Frame]:
@@ -137,9 +143,16 @@ class Pipeline:
         else:
             if result.fault is not None:
                 self.stats.faults[result.fault] += 1
+                self._recent_faults.append(time_s)
             self.last_sample = result.sample
             estimate = self.estimator.update(result.sample)
-            if estimate.status == Status.VALID:
+            while self._recent_faults and self._recent_faults[0] < time_s - FAULT_WINDOW_S:
+                self._recent_faults.popleft()
+            if len(self._recent_faults) >= FAULTS_FOR_STATUS:
+                # Glitches the front end could repair, but so many that the input itself is
+                # suspect (a failing sensor, a spoofing node): say so instead of VALID.
+                estimate = replace(estimate, status=Status.FAULT, confidence=0.0)
+            elif estimate.status == Status.VALID:
                 self._last_valid = estimate
         self.last_estimate = estimate
         return self._emit(time_s, estimate, self.last_sample)

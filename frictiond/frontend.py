@@ -67,6 +67,18 @@ class FrontEndOptions:
     brake_gain_limits: float = 0.25         # correction stays within 1 ± this
 
 
+    def validate(self) -> None:
+        """Called by the config loader: `ValueError` names the bad setting."""
+        if self.derivative_window < 3 or self.derivative_window % 2 == 0:
+            raise ValueError(f"derivative_window: must be an odd number ≥ 3, got {self.derivative_window}")
+        for name in ("min_speed", "default_period", "stale_periods", "max_gap", "spike_threshold",
+                     "accel_bias_time_constant", "brake_gain_time_constant"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
+        if not 0 < self.max_slip < 1:
+            raise ValueError(f"max_slip: must be in (0, 1), got {self.max_slip!r}")
+
+
 @dataclass(slots=True)
 class FrontEndResult:
     """Outcome of one trigger frame."""

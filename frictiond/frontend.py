@@ -58,7 +58,8 @@ class FrontEndOptions:
     speed_gain_down: float = 0.02         # ... and when even the fastest wheel reads too slow
     min_braked_slip: float = 0.15         # under ABS the least-braked wheel slips less than this
     max_all_wheel_slip: float = 0.3       # ... and never all four wheels beyond this at once
-    unexplained_decel: float = 3.0        # m/s^2 of deceleration that zero brake pressure cannot explain
+    stuck_frames: int = 8                 # identical wheel-speed readings in a row that mean "stuck"
+    unexplained_decel: float = 1.5        # m/s^2 of deceleration that zero brake pressure cannot explain
     speed_gain_free_rolling: float = 0.15
     accel_bias_time_constant: float = 3.0   # s, accelerometer offset learning while free rolling
     brake_gain_correction: bool = True
@@ -179,6 +180,8 @@ class FrontEnd:
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
         self._ref_disagreements = 0
+        self._repeats = [0, 0, 0, 0]
+        self._previous_speeds: tuple[float, ...] = (math.nan,) * 4
         self._unexplained_s = 0.0
         self._last_sample_time_s: float | None = None
 
@@ -235,6 +238,11 @@ class FrontEnd:
             self._wheel_speeds.clear()
             return FrontEndResult(None, stale, "wheel speed out of range")
 
+        # A sensor that repeats exactly the same reading frame after frame while the car
+        # changes speed is stuck (quantised noise makes exact repeats rare on a live sensor).
+        for i, w in enumerate(speeds):
+            self._repeats[i] = self._repeats[i] + 1 if w == self._previous_speeds[i] and w > 1.0 else 0
+        self._previous_speeds = speeds
         dt = time_s - self._last_trigger_s
         if dt <= 0.0 or dt > opts.max_gap:
             # A gap or a jump back in time: the derivative window must not straddle it.
@@ -295,6 +303,11 @@ class FrontEnd:
 
         radius = veh.wheel_radius
         wheel_linear = [radius * float(w) for w in omega]
+        stuck = [n >= opts.stuck_frames for n in self._repeats] if abs(accel_long_raw) > 0.5 else [False] * 4
+        if any(stuck) and not all(stuck):
+            # Keep a stuck wheel out of the speed estimate and out of the fit.
+            slowest_ok = min(w for w, st in zip(wheel_linear, stuck) if not st)
+            wheel_linear = [slowest_ok if st else w for w, st in zip(wheel_linear, stuck)]
         braked = [p - veh.brake_pushout_pressure > opts.min_brake_pressure for p in pressures]  # type: ignore[operator]
         braking = any(braked)
         driving = self._has_drive_torque and any(abs(d) > 20.0 for d in drive)
@@ -345,6 +358,7 @@ class FrontEnd:
                 and (braked[i] or (self._has_drive_torque and abs(drive[i]) > 20.0))
                 and load > 50.0
                 and not glitch
+                and not stuck[i]
                 and math.isfinite(mu)
             )
             slips.append(slip)
@@ -363,7 +377,8 @@ class FrontEnd:
             braking=braking,
             speed_from_reference=from_ref,
         )
-        return FrontEndResult(sample, stale, "wheel speed glitch" if glitch else None)
+        fault = "wheel speed glitch" if glitch else ("wheel speed stuck" if any(stuck) else None)
+        return FrontEndResult(sample, stale, fault)
 
     def _update_speed(
         self, time_s: float, wheel_linear: list[float], accel_long: float, wheels_loaded: bool

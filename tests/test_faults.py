@@ -46,10 +46,14 @@ def flagged(estimates, t0, t1):
     return inside and all(e.status != Status.VALID or e.confidence < 0.5 for e in inside[len(inside) // 4:])
 
 
-def test_stuck_wheel_speed_sensor(default_config, dry):
-    frames, sim, codec = dry
+@pytest.mark.parametrize("scenario", ["dry", "wet"])
+def test_stuck_wheel_speed_sensor(default_config, scenario):
+    frames, sim = simulate_frames(default_config, scenario, seed=1)
+    codec = Pipeline(default_config).input_codec
     damaged = faults.stuck_wheel_speed(frames, codec, "FL", 2.0)
-    _, estimates = run(default_config, damaged)
+    pipeline, estimates = run(default_config, damaged)
+    assert pipeline.stats.faults["wheel speed stuck"] > 20
+    assert flagged(estimates, 2.3, 3.5)
     assert_no_false_valid(estimates, truth_lookup(sim))
 
 

@@ -15,6 +15,7 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
         "message, signal, unit, conversion and expected rate. Exit 78 naming the first problem found.",
     )
     parser.add_argument("config_path", metavar="CFG", nargs="?", help="config file (default: the built-in one)")
+    parser.add_argument("--config", "-c", dest="config_option", metavar="CFG", help="the same, as an option")
     parser.set_defaults(func=_do_check)
 
 
@@ -25,7 +26,8 @@ def _do_check(args: argparse.Namespace) -> int:
     from ..config import ConfigError, default_config_path, load_config
     from ..frontend import OPTIONAL_INPUTS, REQUIRED_INPUTS
 
-    path = Path(args.config_path) if args.config_path else default_config_path()
+    chosen = args.config_path or args.config_option
+    path = Path(chosen) if chosen else default_config_path()
     try:
         config = load_config(path)
         input_codec, output_codec = validate_against_dbc(config)

@@ -26,7 +26,8 @@ from _common import default_config  # noqa: E402
 from frictiond import faults  # noqa: E402
 from frictiond.daemon import RateGuard  # noqa: E402
 from frictiond.frames import Frame  # noqa: E402
-from frictiond.pipeline import Pipeline  # noqa: E402
+from frictiond.pipeline import Pipeline
+from frictiond.replay import estimates_of  # noqa: E402
 from frictiond.samples import Status  # noqa: E402
 from frictiond.sim_frames import simulate_frames  # noqa: E402
 
@@ -65,12 +66,7 @@ def random_frames(config, n: int, seed: int = 0) -> tuple[int, int, int]:
 
 
 def run(config, frames):
-    pipeline = Pipeline(config)
-    out = []
-    for f in frames:
-        if pipeline.process(f):
-            out.append(pipeline.last_estimate)
-    return pipeline, out
+    return estimates_of(config, frames)
 
 
 def main(argv=None) -> int:

@@ -99,6 +99,16 @@ def replay_frames(
     )
 
 
+def estimates_of(config: Any, frames: Iterable[Frame]) -> tuple[Pipeline, list[FrictionEstimate]]:
+    """Run a fresh pipeline over frames; the estimate of every update (for tests and benchmarks)."""
+    pipeline = Pipeline(config)
+    estimates = []
+    for frame in frames:
+        if pipeline.process(frame):
+            estimates.append(pipeline.last_estimate)
+    return pipeline, estimates
+
+
 def read_truth_csv(path: str | Path) -> list[dict[str, float]]:
     """Rows of a simulator truth CSV as floats (non-numeric cells become NaN)."""
     rows = []

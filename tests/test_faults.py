@@ -7,17 +7,13 @@ import pytest
 from frictiond import faults
 from frictiond.daemon import RateGuard
 from frictiond.pipeline import Pipeline
+from frictiond.replay import estimates_of
 from frictiond.samples import Status
 from frictiond.sim_frames import simulate_frames
 
 
 def run(config, frames):
-    pipeline = Pipeline(config)
-    out = []
-    for f in frames:
-        if pipeline.process(f):
-            out.append(pipeline.last_estimate)
-    return pipeline, out
+    return estimates_of(config, frames)
 
 
 def truth_lookup(sim):

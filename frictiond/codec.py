@@ -315,6 +315,22 @@ def _idle_value(signal: Any) -> float:
     return 0.0 if signal.offset <= 0 <= (signal.maximum if signal.maximum is not None else math.inf) else signal.offset
 
 
+def _limits(signal: Any) -> tuple[float, float]:
+    """The physical range a signal's bits (and its DBC range) can carry."""
+    bits = signal.length
+    if signal.is_signed:
+        raw_low, raw_high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    else:
+        raw_low, raw_high = 0, (1 << bits) - 1
+    lo = raw_low * signal.scale + signal.offset
+    hi = raw_high * signal.scale + signal.offset
+    if signal.scale < 0:
+        lo, hi = hi, lo
+    if signal.minimum is not None and signal.maximum is not None and signal.minimum < signal.maximum:
+        lo, hi = max(lo, signal.minimum), min(hi, signal.maximum)
+    return lo, hi
+
+
 def _clip(signal: Any, value: float) -> float:
     """Keep a value within what the signal's bits (and DBC range) can carry."""
     bits = signal.length
@@ -355,14 +371,18 @@ class OutputCodec:
         self.wheel_id: int = self.wheel_message.frame_id
         self._signals = {m.frame_id: {s.name: s for s in m.signals} for m in (self.estimate_message, self.wheel_message)}
         self._counters = {self.estimate_id: 0, self.wheel_id: 0}
+        self._limits = {fid: {name: _limits(sig) for name, sig in sigs.items()} for fid, sigs in self._signals.items()}
         self._counter_bit = {
             fid: sigs["Counter"].start for fid, sigs in self._signals.items()
         }
         self.e2e = E2EChecker()
 
     def _encode(self, frame_id: int, message: Any, values: dict[str, float]) -> bytes:
-        sigs = self._signals[frame_id]
-        clipped = {k: _clip(sigs[k], v) for k, v in values.items()}
+        limits = self._limits[frame_id]
+        clipped = {}
+        for k, v in values.items():
+            lo, hi = limits[k]
+            clipped[k] = min(max(v, lo), hi) if v == v else lo  # NaN → the low limit
         payload = bytearray(message.encode(clipped, scaling=True, strict=False, padding=False))
         counter = self._counters[frame_id]
         self._counters[frame_id] = (counter + 1) & 0x0F

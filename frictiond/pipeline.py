@@ -76,6 +76,7 @@ class Pipeline:
         self._last_trigger_s = -math.inf
         self._wheel_divider = max(1, int(config.output.wheel_divider))
         self._recent_faults: deque[float] = deque()
+        self._first_update_s: float | None = None
 
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame) -> list[Frame]:
@@ -126,8 +127,15 @@ class Pipeline:
 
     def _update(self, time_s: float, result: FrontEndResult) -> list[Frame]:
         self.last_result = result
+        if self._first_update_s is None:
+            self._first_update_s = time_s
         if result.stale_messages:
-            estimate = self._held_estimate(time_s, Status.INPUT_STALE)
+            # Right after start a message may simply not have had its first turn yet: that is
+            # INIT, not a timeout. It becomes INPUT_STALE once its timeout has really passed.
+            slowest = max(self.front_end.period_of(m) for m in self.front_end.required_messages)
+            starting = (time_s - self._first_update_s <= self.config.frontend.stale_periods * slowest
+                        and self._last_valid is None)
+            estimate = self._held_estimate(time_s, Status.INIT if starting else Status.INPUT_STALE)
         elif result.fault is not None and result.sample is None:
             self.stats.faults[result.fault] += 1
             estimate = self._held_estimate(time_s, Status.FAULT)

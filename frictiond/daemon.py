@@ -166,6 +166,7 @@ class Daemon:
         self.estimate_log: EstimateLog | None = None
         self._last_rx_time: float | None = None
         self._last_rx_mono = 0.0
+        self._rx_backlog = False     # the last recv returned a frame: more may be queued behind it
         self._last_status_text = ""
         self._last_status_name = ""
         self._updates_saved = 0
@@ -322,6 +323,10 @@ class Daemon:
         """"Now" on the time base of the received frames (socket timestamps, or a log's)."""
         if self._last_rx_time is None:
             return self._clock()
+        if self._rx_backlog:
+            # Frames may still be queued with earlier times than an extrapolated "now": a tick
+            # stamped later than them would put the output out of order (log, listeners).
+            return self._last_rx_time
         return self._last_rx_time + (self._mono() - self._last_rx_mono)
 
     # ------------------------------------------------------------------------------ status
@@ -468,6 +473,7 @@ class Daemon:
                     self._bus_failed(exc, "receive")
                     msg = None
                 else:
+                    self._rx_backlog = msg is not None
                     if self.bus_down:
                         self._bus_ok()
                     elif self._backoff != FIRST_BACKOFF_S:

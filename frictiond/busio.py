@@ -5,6 +5,7 @@ Log formats are chosen by file suffix through python-can's own readers and write
 """
 from __future__ import annotations
 
+import locale
 import logging
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -56,12 +57,86 @@ def _check_suffix(path: Path) -> None:
         )
 
 
+# linux/can.h, as python-can's candump reader interprets them
+_CAN_ERR_FLAG = 0x20000000
+_CAN_ERR_BUSERROR = 0x00000080
+_HEX = frozenset("0123456789abcdefABCDEF")
+
+
+def _candump_line_slow(temp: str) -> Frame:
+    """One stripped candump line, exactly as python-can's `CanutilsLogReader` + `message_to_frame`."""
+    if temp[-2:].lower() in (" r", " t"):
+        timestamp_string, channel_string, frame, _rx = temp.split()
+    else:
+        timestamp_string, channel_string, frame = temp.split()
+    timestamp = float(timestamp_string[1:-1])
+    can_id_string, data = frame.split("#", maxsplit=1)
+    channel: int | str = int(channel_string) if channel_string.isdigit() else channel_string
+    is_extended = len(can_id_string) > 3
+    can_id = int(can_id_string, 16)
+    is_fd = brs = esi = False
+    if data and data[0] == "#":
+        is_fd = True
+        fd_flags = int(data[1])
+        brs, esi = bool(fd_flags & 0x01), bool(fd_flags & 0x02)
+        data = data[2:]
+    data_bin: bytearray | None
+    if data and data[0].lower() == "r":
+        is_remote = True
+        dlc = int(data[1:]) if len(data) > 1 else 0
+        data_bin = None
+    else:
+        is_remote = False
+        dlc = len(data) // 2
+        data_bin = bytearray(int(data[i:i + 2], 16) for i in range(0, len(data), 2))
+    if can_id & _CAN_ERR_FLAG and can_id & _CAN_ERR_BUSERROR:
+        msg = can.Message(timestamp=timestamp, is_error_frame=True)
+    else:
+        msg = can.Message(timestamp=timestamp, arbitration_id=can_id & 0x1FFFFFFF, is_extended_id=is_extended,
+                          is_remote_frame=is_remote, is_fd=is_fd, bitrate_switch=brs, error_state_indicator=esi,
+                          dlc=dlc, data=data_bin, channel=channel)
+    return message_to_frame(msg)
+
+
+def _read_candump(path: Path) -> Iterator[Frame]:
+    """candump -L `.log` files without building a `can.Message` per line (the common lines).
+
+    Classical data frames (`(t) ch ID#HEX`, optional ` R`/` T`) are parsed here; anything else
+    (CAN FD, remote, error frames, odd digits) goes through the same steps as python-can's reader,
+    so the frames are identical to `message_to_frame` over `can.LogReader`.
+    """
+    encoding = locale.getpreferredencoding(False)
+    fromhex = bytes.fromhex
+    hexdigits = _HEX
+    with path.open("r", encoding=encoding) as fh:
+        for line in fh:
+            temp = line.strip()
+            if not temp:
+                continue
+            parts = temp.split()
+            if len(parts) == (4 if temp[-2:].lower() in (" r", " t") else 3):
+                frame = parts[2]
+                k = frame.find("#")
+                id_string = frame[:k]
+                data = frame[k + 1:]
+                if (0 < k <= 8 and not len(data) & 1 and data[:1] != "#" and hexdigits.issuperset(data)
+                        and hexdigits.issuperset(id_string) and parts[0][:1] == "(" and parts[0][-1:] == ")"):
+                    can_id = int(id_string, 16)
+                    if not can_id & _CAN_ERR_FLAG:
+                        yield Frame(float(parts[0][1:-1]), can_id & 0x1FFFFFFF, fromhex(data), k > 3, False, False)
+                        continue
+            yield _candump_line_slow(temp)
+
+
 def read_log(path: str | Path) -> Iterator[Frame]:
     """Frames of a log file, in file order (timestamps may go backwards in spliced logs)."""
     path = Path(path)
     _check_suffix(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such log file")
+    if path.suffix.lower() == ".log":
+        yield from _read_candump(path)
+        return
     reader = can.LogReader(str(path))
     try:
         for msg in reader:

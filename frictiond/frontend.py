@@ -259,8 +259,57 @@ class FrontEnd:
         return self._compute_sample(stale)
 
     # -- the physics ---------------------------------------------------------------------------
-    def _fit_wheels(self) -> tuple[float, np.ndarray, np.ndarray, bool]:
-        """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch)."""
+    def _fit_wheels(self) -> tuple[float, list[float], list[float], bool]:
+        """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch).
+
+        Least squares in closed form on plain floats (the normal equations of a 3-parameter fit
+        in the time offset scaled to [−1, 1], so they stay well conditioned): a handful of points
+        and four wheels are far too small for numpy's per-call overhead.
+        """
+        times = self._wheel_times
+        rows = self._wheel_speeds
+        n = len(times)
+        t_c = float(times[n // 2])
+        tau = [t - t_c for t in times]
+        h = max(abs(tau[0]), abs(tau[-1])) or 1.0
+        u = [x / h for x in tau]
+        u2 = [x * x for x in u]
+        s1 = sum(u)
+        s2 = sum(u2)
+        s3 = sum(a * b for a, b in zip(u, u2))
+        s4 = sum(x * x for x in u2)
+        # Symmetric 3×3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate.
+        c00 = s2 * s4 - s3 * s3
+        c01 = s2 * s3 - s1 * s4
+        c02 = s1 * s3 - s2 * s2
+        c11 = n * s4 - s2 * s2
+        c12 = s1 * s2 - n * s3
+        c22 = n * s2 - s1 * s1
+        det = n * c00 + s1 * c01 + s2 * c02
+        if not det > 1e-9 * max(n * s2 * s4, 1e-300):
+            return self._fit_wheels_numpy()
+        inv = 1.0 / det
+        omega = []
+        omega_dot = []
+        worst = 0.0
+        for i in range(4):
+            y = [r[i] for r in rows]
+            b0 = sum(y)
+            b1 = sum(a * b for a, b in zip(u, y))
+            b2 = sum(a * b for a, b in zip(u2, y))
+            k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv
+            k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv
+            k2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv
+            for a, a2, yy in zip(u, u2, y):
+                e = abs(yy - (k0 + k1 * a + k2 * a2))
+                if e > worst:
+                    worst = e
+            omega.append(k0)
+            omega_dot.append(k1 / h)
+        return t_c, omega, omega_dot, worst > self.options.spike_threshold
+
+    def _fit_wheels_numpy(self) -> tuple[float, list[float], list[float], bool]:
+        """The same fit by numpy's SVD least squares (for a degenerate spread of timestamps)."""
         times = np.fromiter(self._wheel_times, dtype=float, count=len(self._wheel_times))
         speeds = np.array(self._wheel_speeds, dtype=float)
         centre = len(times) // 2
@@ -273,7 +322,7 @@ class FrontEnd:
         coef, *_ = np.linalg.lstsq(design, speeds, rcond=None)
         residual = speeds - design @ coef
         glitch = bool(np.max(np.abs(residual)) > self.options.spike_threshold)
-        return t_c, coef[0], coef[1], glitch
+        return t_c, [float(w) for w in coef[0]], [float(a) for a in coef[1]], glitch
 
     def _value(self, name: str, time_s: float) -> float | None:
         message = self._signal_message.get(name)
@@ -441,10 +490,10 @@ class FrontEnd:
             h.times and h.times[-1] >= time_s
         )
 
-    def _learn_accel_bias(self, time_s: float, omega_dot: np.ndarray, accel_long_raw: float) -> None:
+    def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float) -> None:
         # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
         # (or road grade, which the same correction absorbs).
-        wheel_accel = self.vehicle.wheel_radius * float(np.mean(omega_dot))
+        wheel_accel = self.vehicle.wheel_radius * (sum(omega_dot) / len(omega_dot))
         alpha = min(1.0, self.options.default_period / max(self.options.accel_bias_time_constant, 1e-3))
         error = accel_long_raw - wheel_accel
         if abs(error) < 2.0:

@@ -61,6 +61,7 @@ class Pipeline:
         input_db = load_databases(config.can.dbc, strict=config.can.dbc_strict)
         output_db = load_databases([config.can.output_dbc], strict=True)
         self.input_codec = InputCodec(input_db, config.signals, config.vehicle.wheel_radius)
+        self._input_ids = self.input_codec.input_ids
         self.output_codec = OutputCodec(output_db)
         messages = self.input_codec.input_messages()
         trigger = next(m.name for m in messages if m.frame_id == self.input_codec.trigger_id)
@@ -83,10 +84,17 @@ class Pipeline:
         """One received frame in; the output frames it causes (empty for most frames)."""
         stats = self.stats
         stats.frames_read += 1
+        if frame.can_id not in self._input_ids:
+            # Most of a bus is other ECUs' traffic: counted and dropped before anything else.
+            if frame.is_error:
+                stats.error_frames += 1
+            else:
+                stats.ignored_frames += 1
+            return []
         if frame.is_error:
             stats.error_frames += 1
             return []
-        if frame.is_remote or frame.is_extended and frame.can_id not in self.input_codec.input_ids:
+        if frame.is_remote:
             stats.ignored_frames += 1
             return []
         try:

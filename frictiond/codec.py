@@ -37,14 +37,15 @@ _DEG = math.pi / 180.0
 _UNITS: dict[str, dict[str, float | None]] = {
     # None: "ground speed, divide by the wheel radius" (resolved per vehicle)
     "wheel_speed": {"rad/s": 1.0, "1/s": 1.0, "rpm": 2 * math.pi / 60, "1/min": 2 * math.pi / 60,
-                    "deg/s": _DEG, "°/s": _DEG, "m/s": None, "km/h": None, "kph": None, "mph": None},
-    "acceleration": {"m/s^2": 1.0, "m/s²": 1.0, "m/s2": 1.0, "m/(s^2)": 1.0, "g": GRAVITY_MPS2},
+                    "U/min": 2 * math.pi / 60, "rev/min": 2 * math.pi / 60,
+                    "deg/s": _DEG, "°/s": _DEG, "m/s": None, "km/h": None, "kph": None, "kmh": None, "mph": None},
+    "acceleration": {"m/s^2": 1.0, "m/s²": 1.0, "m/s2": 1.0, "m/(s^2)": 1.0, "m/s/s": 1.0, "g": GRAVITY_MPS2},
     "angular_rate": {"rad/s": 1.0, "deg/s": _DEG, "°/s": _DEG},
     "pressure": {"bar": 1.0, "mbar": 1e-3, "kpa": 0.01, "mpa": 10.0, "pa": 1e-5, "psi": 0.0689475729},
-    "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704},
+    "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704},
     "torque": {"n.m": 1.0, "nm": 1.0, "n*m": 1.0, "n·m": 1.0, "knm": 1000.0},
 }
-_GROUND_SPEED = {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704}
+_GROUND_SPEED = {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704}
 CANONICAL_UNIT = {"wheel_speed": "rad/s", "acceleration": "m/s^2", "angular_rate": "rad/s",
                   "pressure": "bar", "speed": "m/s", "torque": "N.m"}
 
@@ -140,33 +141,89 @@ def _resolve_unit(name: str, source: SignalSource, dbc_unit: str, wheel_radius: 
 
 
 def resolve_signals(db: Database, signals: Mapping[str, SignalSource], wheel_radius: float) -> list[ResolvedSignal]:
-    """Bind every mapped input to its DBC signal; `ConfigError` names each missing piece."""
+    """Bind every mapped input to its DBC signal; one `ConfigError` line names every missing piece."""
     resolved = []
+    problems: list[str] = []
     for name, source in signals.items():
         try:
             message = db.get_message_by_name(source.message)
         except KeyError:
-            raise ConfigError(f"signals.{name}: message {source.message!r} is not in the DBC") from None
+            problems.append(f"signals.{name}: message {source.message!r} is not in the DBC")
+            continue
         try:
             signal = message.get_signal_by_name(source.signal)
         except KeyError:
-            raise ConfigError(
-                f"signals.{name}: signal {source.signal!r} is not in message {source.message!r} of the DBC"
-            ) from None
+            problems.append(f"signals.{name}: signal {source.signal!r} is not in message {source.message!r} of the DBC")
+            continue
         dbc_unit = signal.unit or ""
-        unit, factor, note = _resolve_unit(name, source, dbc_unit, wheel_radius)
+        try:
+            unit, factor, note = _resolve_unit(name, source, dbc_unit, wheel_radius)
+        except ConfigError as exc:
+            problems.append(str(exc))
+            continue
         mux = tuple(signal.multiplexer_ids) if signal.multiplexer_ids else None
         resolved.append(
             ResolvedSignal(name, message.name, signal.name, dbc_unit, unit, factor, source.scale, source.offset,
                            mux, signal.minimum, signal.maximum, note)
         )
+    if problems:
+        more = f" ({len(problems)} problems)" if len(problems) > 1 else ""
+        raise ConfigError("; ".join(problems) + more)
     return resolved
+
+
+def _bit_field(signal: Any, length: int) -> tuple[bool, int, int] | None:
+    """(little-endian, shift, mask) of a signal in the payload read as one integer; None if unusable.
+
+    Little-endian (Intel) signals are read from `int.from_bytes(data, "little")`, big-endian
+    (Motorola) ones from `int.from_bytes(data, "big")`, exactly the bit positions cantools'
+    bitstruct formats use.
+    """
+    n = signal.length
+    if n <= 0:
+        return None
+    if signal.byte_order == "little_endian":
+        shift = signal.start
+    else:
+        shift = 8 * length - (8 * (signal.start // 8) + (7 - signal.start % 8)) - n
+    if shift < 0 or shift + n > 8 * length:
+        return None
+    return signal.byte_order == "little_endian", shift, (1 << n) - 1
+
+
+def _simple_layout(message: Any) -> bool:
+    """True when a message's signals can be read with shifts and masks, bit for bit as cantools."""
+    if message.is_container or message.is_multiplexed() or not message.signals:
+        return False
+    used = [0, 0]   # bits taken, per byte order (cantools packs each order in its own format)
+    for sig in message.signals:
+        if sig.conversion.is_float or getattr(sig, "is_float", False):
+            return False
+        field = _bit_field(sig, message.length)
+        if field is None:
+            return False
+        little, shift, mask = field
+        bits = mask << shift
+        if used[little] & bits:
+            return False  # overlapping signals: leave them to cantools
+        used[little] |= bits
+    return True
+
+
+def _scaler(conversion: Any) -> tuple[bool, Any, Any]:
+    """(identity, scale, offset) reproducing `conversion.raw_to_scaled(raw, decode_choices=False)`."""
+    inner = getattr(conversion, "_conversion", None)  # NamedSignalConversion delegates
+    if inner is not None:
+        conversion = inner
+    if type(conversion).__name__ == "IdentityConversion":
+        return True, 1, 0
+    return False, conversion.scale, conversion.offset
 
 
 class _MessagePlan:
     """Everything needed to decode one input message quickly."""
 
-    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range")
+    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range", "fields")
 
     def __init__(self, message: Any, signals: list[ResolvedSignal], is_trigger: bool) -> None:
         self.message = message
@@ -180,6 +237,37 @@ class _MessagePlan:
             (s, s.minimum, s.maximum) for s in signals
             if s.minimum is not None and s.maximum is not None and s.minimum < s.maximum
         ]
+        self.fields: tuple | None = None
+
+    def compile(self, counter: Any | None) -> None:
+        """Fast path: the signals this plan reads (mapped ones and the alive counter), as
+        shift/mask/sign/scale of the payload integer; `fields` None → decode with cantools."""
+        message = self.message
+        signals = self.signals
+        self.fields = None
+        if _simple_layout(message):
+            wanted = {s.signal for s in signals} | ({counter.name} if counter is not None else set())
+            fields = []
+            for sig in message.signals:
+                if sig.name not in wanted:
+                    continue
+                little, shift, mask = _bit_field(sig, message.length)  # type: ignore[misc]
+                identity, scale, offset = _scaler(sig.conversion)
+                sign = (1 << (sig.length - 1)) if sig.is_signed else 0
+                fields.append((sig.name, little, shift, mask, sign, identity, scale, offset))
+            self.fields = tuple(fields)
+
+    def unpack(self, data: bytes) -> dict[str, Any]:
+        """The wanted signals' scaled values; identical to cantools' `decode(..., decode_choices=False)`."""
+        little_int = int.from_bytes(data, "little")
+        big_int = int.from_bytes(data, "big")
+        out = {}
+        for name, little, shift, mask, sign, identity, scale, offset in self.fields:  # type: ignore[union-attr]
+            raw = ((little_int if little else big_int) >> shift) & mask
+            if sign and raw & sign:
+                raw -= sign << 1
+            out[name] = raw if identity else raw * scale + offset
+        return out
 
 
 class InputCodec:
@@ -210,12 +298,25 @@ class InputCodec:
         self.trigger_id = next(p.frame_id for p in self._plans.values() if p.is_trigger)
         self.counter_jumps = 0
         self._counter_signals = {
-            fid: next((s for s in p.message.signals if s.name.lower() in ("counter", "alive_counter", "msgcounter")
-                       or s.name.lower().endswith("_counter") or s.name.lower().endswith("alivecounter")), None)
+            fid: next((s for s in p.message.signals if _is_counter_name(s.name) and not s.multiplexer_ids), None)
             for fid, p in self._plans.items()
         }
+        for fid, plan in self._plans.items():
+            plan.compile(self._counter_signals.get(fid))
         self._last_counter: dict[int, int] = {}
         self._encode_counters: dict[int, int] = {}
+
+    def counter_signal(self, message: str) -> str | None:
+        """Name of the alive counter checked in an input message (None: the message has none)."""
+        plan = next(p for p in self._plans.values() if p.name == message)
+        signal = self._counter_signals.get(plan.frame_id)
+        return signal.name if signal is not None else None
+
+    def pages(self, message: str) -> int:
+        """Number of multiplexer pages a message cycles through (1 if not multiplexed)."""
+        plan = next(p for p in self._plans.values() if p.name == message)
+        ids = {i for s in plan.message.signals for i in (s.multiplexer_ids or ())}
+        return max(1, len(ids))
 
     def input_messages(self) -> list[InputMessage]:
         out = []
@@ -239,10 +340,15 @@ class InputCodec:
         data = frame.data
         if len(data) != plan.length:
             raise DecodeFailure("wrong length", f"{plan.name} has {len(data)} bytes, DBC says {plan.length}")
-        try:
-            raw = plan.message.decode(data, decode_choices=False, scaling=True)
-        except Exception as exc:  # bad multiplexer value, truncated, ...
-            raise DecodeFailure("undecodable", f"{plan.name}: {exc}") from None
+        if plan.fields is not None:
+            raw = plan.unpack(data)
+        else:
+            try:
+                raw = plan.message.decode(data, decode_choices=False, scaling=True)
+            except Exception as exc:  # bad multiplexer value, truncated, ...
+                raise DecodeFailure("undecodable", f"{plan.name}: {exc}") from None
+        # The counter says whether frames were lost on the bus, even if we refuse this one's values.
+        self._check_counter(frame.can_id, raw)
         for s, low, high in plan.check_range:
             value = raw.get(s.signal)
             if value is not None and not (low - 1e-9 * abs(low) - 1e-9 <= value <= high + 1e-9 * abs(high) + 1e-9):
@@ -256,7 +362,6 @@ class InputCodec:
             if not math.isfinite(v):
                 raise DecodeFailure("not finite", f"{plan.name}.{s.signal}")
             values[s.name] = v
-        self._check_counter(frame.can_id, raw)
         return DecodedInput(frame.time_s, plan.name, values, plan.is_trigger)
 
     def _check_counter(self, frame_id: int, raw: Mapping[str, Any]) -> None:
@@ -282,7 +387,10 @@ class InputCodec:
             if s.name not in values:
                 continue
             keys = s.multiplexer_ids or (None,)
-            pages.setdefault(keys[0], {})[s.signal] = s.from_si(values[s.name])
+            page = pages.setdefault(keys[0], {})
+            # Several inputs on one signal (a master-cylinder pressure split by axle factors):
+            # the first mapped one (config order, FL first) sets it.
+            page.setdefault(s.signal, s.from_si(values[s.name]))
         payloads = []
         counter_signal = self._counter_signals.get(plan.frame_id)
         counter = self._encode_counters.get(plan.frame_id, 0)
@@ -305,6 +413,16 @@ class InputCodec:
                     full[sig.name] = _clip(sig, full[sig.name])
             payloads.append(bytes(msg.encode(full, scaling=True, strict=False, padding=False)))
         return payloads
+
+
+_COUNTER_NAMES = ("counter", "alive_counter", "alivecounter", "msgcounter", "rolling_counter", "rollingcounter", "bz")
+_COUNTER_SUFFIXES = ("_counter", "alivecounter", "rollingcounter", "_cnt_alive", "_bz")
+
+
+def _is_counter_name(name: str) -> bool:
+    """Alive/rolling counters by their usual names (Counter, ESP_21_Counter, AliveCounter, ..._BZ)."""
+    low = name.lower()
+    return low in _COUNTER_NAMES or low.endswith(_COUNTER_SUFFIXES)
 
 
 def _idle_value(signal: Any) -> float:
@@ -350,6 +468,82 @@ def _clip(signal: Any, value: float) -> float:
 
 
 # -------------------------------------------------------------------------------- outputs
+class _Packer:
+    """`message.encode(values, scaling=True, strict=False, padding=False)` with shifts and masks.
+
+    Mirrors cantools' walk of the codec tree (multiplexed pages included), precompiled per node;
+    a message it cannot reproduce bit for bit (float or overlapping signals, containers), or a raw
+    value outside its field, goes to cantools itself.
+    """
+
+    def __init__(self, message: Any) -> None:
+        self.message = message
+        self.length = message.length
+        self.root = self._compile(message._codecs) if not message.is_container and _packable(message) else None
+
+    def _compile(self, node: dict) -> tuple:
+        fields = []
+        for sig in node["signals"]:
+            little, shift, mask = _bit_field(sig, self.length)  # type: ignore[misc]
+            if sig.is_signed:
+                low, high = -(1 << (sig.length - 1)), (1 << (sig.length - 1)) - 1
+            else:
+                low, high = 0, mask
+            fields.append((sig.name, sig.conversion.numeric_scaled_to_raw, little, shift, mask, low, high))
+        muxes = tuple(
+            (name, {mux: self._compile(sub) for mux, sub in pages.items()})
+            for name, pages in node["multiplexers"].items()
+        )
+        return tuple(fields), muxes
+
+    def encode(self, values: dict[str, Any]) -> bytes:
+        if self.root is None:
+            return bytes(self.message.encode(values, scaling=True, strict=False, padding=False))
+        words = [0, 0]  # big-endian-read, little-endian-read payload integers
+        if not self._pack(self.root, values, words):
+            return bytes(self.message.encode(values, scaling=True, strict=False, padding=False))
+        n = self.length
+        little = words[1].to_bytes(n, "little")
+        return (int.from_bytes(little, "big") | words[0]).to_bytes(n, "big")
+
+    def _pack(self, node: tuple, values: dict[str, Any], words: list[int]) -> bool:
+        fields, muxes = node
+        for name, to_raw, little, shift, mask, low, high in fields:
+            value = values[name]
+            if not isinstance(value, (int, float)):
+                return False  # choice names and the like: cantools' own path
+            raw = to_raw(value)
+            if not low <= raw <= high:
+                return False
+            words[little] |= (raw & mask) << shift
+        for name, pages in muxes:
+            value = values[name]
+            if not isinstance(value, (int, float)):
+                return False
+            sub = pages.get(value)
+            if sub is None or not self._pack(sub, values, words):
+                return False
+        return True
+
+
+def _packable(message: Any) -> bool:
+    """Every signal of the message (on any page) an integer field inside the payload."""
+    for sig in message.signals:
+        if sig.conversion.is_float or getattr(sig, "is_float", False) or _bit_field(sig, message.length) is None:
+            return False
+
+    def walk(node: dict) -> bool:
+        used = [0, 0]
+        for sig in node["signals"]:
+            little, shift, mask = _bit_field(sig, message.length)  # type: ignore[misc]
+            if used[little] & (mask << shift):
+                return False
+            used[little] |= mask << shift
+        return all(walk(sub) for pages in node["multiplexers"].values() for sub in pages.values())
+
+    return message._codecs is not None and walk(message._codecs)
+
+
 class OutputCodec:
     """FRICTION_ESTIMATE / FRICTION_WHEEL encoding with the E2E counter and CRC; decoding for tools."""
 
@@ -375,6 +569,7 @@ class OutputCodec:
         self._counter_bit = {
             fid: sigs["Counter"].start for fid, sigs in self._signals.items()
         }
+        self._packers = {m.frame_id: _Packer(m) for m in (self.estimate_message, self.wheel_message)}
         self.e2e = E2EChecker()
 
     def _encode(self, frame_id: int, message: Any, values: dict[str, float]) -> bytes:
@@ -383,7 +578,7 @@ class OutputCodec:
         for k, v in values.items():
             lo, hi = limits[k]
             clipped[k] = min(max(v, lo), hi) if v == v else lo  # NaN → the low limit
-        payload = bytearray(message.encode(clipped, scaling=True, strict=False, padding=False))
+        payload = bytearray(self._packers[frame_id].encode(clipped))
         counter = self._counters[frame_id]
         self._counters[frame_id] = (counter + 1) & 0x0F
         return bytes(protect(frame_id, payload, counter, self._counter_bit[frame_id]))

@@ -1,20 +1,20 @@
 """Bring your own car: a production-style DBC through the config alone (issue 6)."""
 from __future__ import annotations
 
-import dataclasses
-import random
 import subprocess
 import sys
 
+import can
+import cantools
 import numpy as np
 import pytest
 
 from frictiond.codec import validate_against_dbc
-from frictiond.config import ConfigError, load_config
+from frictiond.config import load_config
 from frictiond.evaluation import evaluate
 from frictiond.frames import Frame
 from frictiond.pipeline import Pipeline
-from frictiond.replay import ReplayRecorder, replay_frames
+from frictiond.replay import ReplayRecorder, estimates_of, read_truth_csv, replay_frames
 from frictiond.samples import Status
 from frictiond.sim_frames import background_traffic, frames_per_second_for_load, merge_frames, simulate_frames
 
@@ -64,9 +64,13 @@ def test_example_input_counters_are_checked():
     trigger = pipeline.input_codec.trigger_id
     idx = [i for i, f in enumerate(frames) if f.can_id == trigger]
     damaged = [f for i, f in enumerate(frames) if i not in (idx[100], idx[101])]
-    damaged.insert(idx[200], frames[idx[200]])
-    pipeline, _, _ = replay(config, damaged)
-    assert pipeline.input_codec.counter_jumps >= 2
+    repeated = frames[idx[200]]
+    damaged.insert(damaged.index(repeated) + 1, repeated)
+    pipeline, summary, _ = replay(config, damaged)
+    # The gap counts once, the repeat once (the sequence then resumes from the repeated value).
+    assert pipeline.input_codec.counter_jumps == 2
+    assert "counter jumps     2" in summary.format()
+    assert "1 repeated/out-of-order wheel-speed frames skipped" in summary.format()
 
 
 def test_check_config_names_every_mapping():
@@ -74,72 +78,84 @@ def test_check_config_names_every_mapping():
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
-    for text in ("ESP_21", "WhlSpd_FL", "km/h", "ESP_LongDecel", "×-1", "ESP_LatAccel", "×9.80665",
-                 "WhlPress_RR mux [3]", "deg/s", "100 Hz", "vehicle_speed_ref", "absent: optional", "OK"):
-        assert text in out, text
+    rows = {line.split()[0]: line for line in out.splitlines() if line.strip()}
+    expected = {  # input: message, signal, DBC unit, scale, rate
+        "wheel_speed_fl": ("ESP_21", "WhlSpd_FL", "km/h", "×1", "100 Hz"),
+        "wheel_speed_rr": ("ESP_21", "WhlSpd_RR", "km/h", "×1", "100 Hz"),
+        "accel_long": ("ESP_02", "ESP_LongDecel", "m/s^2", "×-1", "100 Hz"),
+        "accel_lat": ("ESP_02", "ESP_LatAccel", "g", "×9.80665", "100 Hz"),
+        "yaw_rate": ("ESP_02", "ESP_YawRate", "deg/s", "×0.0174533", "100 Hz"),
+        "brake_pressure_fl": ("ESP_WhlPress", "WhlPress_FL mux [0]", "bar", "×1", "50 Hz per page"),
+        "brake_pressure_rr": ("ESP_WhlPress", "WhlPress_RR mux [3]", "bar", "×1", "50 Hz per page"),
+    }
+    for name, texts in expected.items():
+        for text in texts:
+            assert text in rows[name], (name, text, rows[name])
+    assert "×0.854701" in rows["wheel_speed_fl"]          # km/h → rad/s with the 0.325 m wheel
+    for name in ("vehicle_speed_ref", "drive_torque_fl"):
+        assert "absent: optional" in rows[name]
+    assert "alive counter ESP_21_Counter checked" in out and "multiplexed (4 pages)" in out
+    assert out.rstrip().endswith("OK")
+    master = subprocess.run([sys.executable, "-m", "frictiond.cli.main", "check-config", str(MASTER)],
+                            capture_output=True, text=True, timeout=60).stdout
+    row = next(line for line in master.splitlines() if line.startswith("brake_pressure_rl"))
+    assert "BRK_01" in row and "MasterCylPressure" in row and "×0.1" in row and "50 Hz" in row
 
 
-def test_master_cylinder_split_by_axle_factors():
+def test_master_cylinder_example():
     config = load_config(MASTER)
     codec, _ = validate_against_dbc(config)
     db_msg = codec.db.get_message_by_name("BRK_01")
     data = db_msg.encode({"BRK_01_Chksum": 0, "BRK_01_Counter": 1, "MasterCylPressure": 800, "BrakePedalSwitch": 1})
     values = codec.decode(Frame(0.0, db_msg.frame_id, data)).values
     assert values["brake_pressure_fl"] == pytest.approx(80.0)
-    assert values["brake_pressure_rr"] == pytest.approx(56.0)
+    assert values["brake_pressure_rr"] == pytest.approx(80.0)   # EBD car: no fixed rear valve
+    # Usable on a high-μ stop; the caveat (ABS modulation the master cylinder does not see) is in
+    # docs/vehicle-dbc.md: on snow, where ABS works hardest, it is measurably worse.
+    frames, sim = simulate_frames(config, "dry", seed=4)
+    _, estimates = estimates_of(config, frames)
+    report = evaluate(estimates, sim.truth.rows())
+    assert report.false_valid_count == 0 and report.valid_count > 100 and report.mae < 0.06, report
 
 
-def test_lenient_dbc_and_several_files(tmp_path, config_dict):
-    # An overlapping signal: cantools refuses it strictly, accepts it with strict=False.
-    extra = tmp_path / "extra.dbc"
-    extra.write_text(
-        'VERSION ""\n\nNS_ :\n\nBS_:\n\nBU_: X\n\n'
-        "BO_ 1536 ODD: 2 X\n SG_ A : 0|12@1+ (1,0) [0|4095] \"\" X\n SG_ B : 8|8@1+ (1,0) [0|255] \"\" X\n\n")
-    config_dict["can"]["dbc"] = [config_dict["can"]["dbc"], str(extra)]
-    config_dict["can"]["dbc_strict"] = True
-    with pytest.raises(ConfigError, match="extra.dbc"):
-        validate_against_dbc(load_config(write_config(tmp_path, config_dict)))
-    config_dict["can"]["dbc_strict"] = False
-    config = load_config(write_config(tmp_path, config_dict))
-    codec, _ = validate_against_dbc(config)
-    assert "ODD" in {m.name for m in codec.db.messages}
+def cli(*args, cwd):
+    proc = subprocess.run([sys.executable, "-m", "frictiond.cli.main", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout
 
 
-def test_capture_with_glitches_and_junk_never_gives_a_false_valid():
-    config = load_config(EXAMPLE)
-    frames, sim = simulate_frames(config, "wet", seed=9)
-    rng = random.Random(3)
-    trigger = next(m.frame_id for m in Pipeline(config).input_codec.input_messages() if m.name == "ESP_21")
-    noisy = []
-    for f in frames:
-        if f.can_id == trigger and rng.random() < 0.02:
-            # single-sample spike on one wheel: flip high bits of a wheel-speed field
-            data = bytearray(f.data)
-            data[rng.randrange(1, 8)] ^= 0x40
-            f = f._replace(data=bytes(data))
-        noisy.append(f)
-        r = rng.random()
-        if r < 0.01:
-            noisy.append(Frame(f.time_s, trigger, bytes(rng.randrange(0, 7))))          # wrong length
-        elif r < 0.02:
-            noisy.append(Frame(f.time_s, 0x1FFFF0A0, bytes(8), is_extended=True))    # extended ID
-        elif r < 0.025:
-            noisy.append(Frame(f.time_s, 0x20000004, bytes(8), is_error=True))        # error frame
-        elif r < 0.03:
-            noisy.append(Frame(f.time_s, 0x101, b"", is_remote=True))                 # remote frame
-    other = background_traffic(0.0, frames[-1].time_s, 20000, {trigger, 0x101, 0x106, 0x1B5, 0x3E0, 0x3E1}, seed=2)
-    capture = list(merge_frames(noisy, other))
-    assert len(capture) > 50_000
-    pipeline, summary, recorder = replay(config, capture)
-    stats = summary.stats
-    assert stats.undecodable_total > 0 and stats.error_frames > 0 and stats.ignored_frames > 50_000
-    text = summary.format()
-    assert "undecodable" in text and "wrong length" in text
-    rows = sim.truth.rows()
+@pytest.mark.parametrize("scenario", ["dry", "wet", "snow"])
+def test_example_car_through_the_cli(tmp_path, scenario):
+    """simulate --config the example car with half a bus of unrelated traffic → replay → decode."""
+    log, out, truth = tmp_path / "in.log", tmp_path / "out.log", tmp_path / "truth.csv"
+    cli("simulate", "--config", str(EXAMPLE), "--scenario", scenario, "--background-load", "0.5", "--seed", "7",
+        "--output", str(log), "--truth", str(truth), cwd=tmp_path)
+    summary = cli("replay", str(log), "--config", str(EXAMPLE), "--output", str(out), cwd=tmp_path)
+    lines = {line[:18].strip(): line[18:] for line in summary.splitlines()}
+    assert int(lines["ignored frames"].split()[0]) > 5 * int(lines["input frames"].split()[0])
+    assert int(lines["undecodable"].split()[0]) == 0
+    assert int(lines["counter jumps"].split()[0]) == 0
+    db = cantools.database.load_file(str(REPO / "dbc" / "frictiond.dbc"))
+    estimates = [(m.timestamp, db.decode_message(0x3E0, m.data, decode_choices=False))
+                 for m in can.LogReader(str(out)) if m.arbitration_id == 0x3E0]
+    valid = [(t, d["MuMax"]) for t, d in estimates if d["EstimatorStatus"] == int(Status.VALID)]
+    assert len(valid) > 150
+    rows = read_truth_csv(truth)
     t_truth = np.array([r["time_s"] for r in rows])
     mu_truth = np.array([r["mu_max"] for r in rows])
-    for e in recorder.estimates:
-        if e.status == Status.VALID:
-            truth = mu_truth[min(np.searchsorted(t_truth, e.time_s), len(t_truth) - 1)]
-            assert abs(e.mu_max - truth) <= 0.2 * truth
-    assert sum(e.status == Status.VALID for e in recorder.estimates) > 100
+    errors = [abs(mu - mu_truth[min(np.searchsorted(t_truth, t), len(t_truth) - 1)]) for t, mu in valid]
+    assert max(errors) < 0.1, max(errors)
+
+
+@pytest.mark.xfail(strict=True, reason="frontend._MessageHistory merges multiplexer pages and stamps a page's "
+                   "held value with the newest frame's time: per-wheel pressures at 50 Hz lag by up to 15 ms "
+                   "(MAE dry 0.047 vs 0.009 with the same pressures unmultiplexed at 50 Hz)")
+def test_multiplexed_wheel_pressures_cost_no_accuracy():
+    maes = {}
+    for path in (EXAMPLE, DEFAULT):
+        config = load_config(path)
+        frames, sim = simulate_frames(config, "dry", seed=4)
+        _, estimates = estimates_of(config, frames)
+        maes[path] = evaluate(estimates, sim.truth.rows()).mae
+    assert abs(maes[EXAMPLE] - maes[DEFAULT]) < 0.015, maes

@@ -40,23 +40,44 @@ def _do_check(args: argparse.Namespace) -> int:
     print(f"bus      {config.can.interface} {config.can.channel}", file=out)
     print(f"estimator {config.estimator.kind}", file=out)
     messages = {m.name: m for m in input_codec.input_messages()}
-    print(f"\n{'input':20s} {'message':22s} {'signal':22s} {'dbc unit':9s} {'as':7s} {'to SI':>10s}  rate", file=out)
+    mw = max(len("message"), *(len(n) for n in messages))
+    sw = max(len("signal"), *(len(r.signal) + (6 + len(str(list(r.multiplexer_ids))) if r.multiplexer_ids else 0)
+                               for r in input_codec.resolved))
+    print(f"\n{'input':18s} {'message':{mw}s} {'signal':{sw}s} {'dbc unit':8s} {'as':6s} {'scale':>13s} "
+          f"{'to SI':>11s}  rate", file=out)
     resolved = {r.name: r for r in input_codec.resolved}
     for name in REQUIRED_INPUTS + OPTIONAL_INPUTS:
         r = resolved.get(name)
         if r is None:
             tag = "(absent: optional)" if name in OPTIONAL_INPUTS else "(MISSING)"
-            print(f"{name:20s} {tag}", file=out)
+            print(f"{name:18s} {tag}", file=out)
             continue
         msg = messages[r.message]
-        rate = f"{1 / msg.period_s:.0f} Hz" if msg.period_s else "? (no GenMsgCycleTime; assumes 100 Hz)"
+        rate = _rate(msg.period_s, input_codec.pages(r.message) if r.multiplexer_ids else 1)
+        scale = f"×{r.scale:g}" + (f" {r.offset:+g}" if r.offset else "")
         conv = f"×{r.scale * r.factor:.6g}" + (f" {r.offset * r.factor:+.4g}" if r.offset else "")
         mux = f" mux {list(r.multiplexer_ids)}" if r.multiplexer_ids else ""
         note = f"  [{r.note}]" if r.note else ""
-        print(f"{name:20s} {r.message:22s} {r.signal + mux:22s} {r.dbc_unit or '-':9s} {r.unit:7s} {conv:>10s}  {rate}{note}",
-              file=out)
+        print(f"{name:18s} {r.message:{mw}s} {r.signal + mux:{sw}s} {r.dbc_unit or '-':8s} {r.unit:6s} {scale:>13s} "
+              f"{conv:>11s}  {rate}{note}", file=out)
+    print("\nmessages", file=out)
+    for m in sorted(messages.values(), key=lambda m: m.frame_id):
+        counter = input_codec.counter_signal(m.name)
+        kind = f", multiplexed ({input_codec.pages(m.name)} pages)" if m.is_multiplexed else ""
+        print(f"  {m.name:{mw}s} 0x{m.frame_id:03X}  {m.length} bytes  {_rate(m.period_s, 1)}{kind}  "
+              + (f"alive counter {counter} checked" if counter else "no alive counter"), file=out)
     print(f"\ntrigger  {input_codec.trigger_message} (one estimator update per frame)", file=out)
     print(f"outputs  FRICTION_ESTIMATE 0x{output_codec.estimate_id:03X}, FRICTION_WHEEL 0x{output_codec.wheel_id:03X} "
           f"(from {config.can.output_dbc})", file=out)
     print("OK", file=out)
     return 0
+
+
+def _rate(period_s: float | None, pages: int) -> str:
+    """Expected rate of a signal: its message's rate, divided among the multiplexer pages."""
+    if not period_s:
+        return "? (no GenMsgCycleTime; assumes 100 Hz)"
+    text = f"{1 / period_s:.0f} Hz"
+    if pages > 1:
+        text += f" ({1 / (period_s * pages):.0f} Hz per page)"
+    return text

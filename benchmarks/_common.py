@@ -20,9 +20,13 @@ def braking_samples(scenarios: Sequence[str] = ("dry", "wet", "snow", "split_mu"
     for k, scenario in enumerate(scenarios):
         frames, _ = simulate_frames(config, scenario, seed=seed + k, time_offset_s=100.0 * k)
         pipeline = Pipeline(config)
+        previous = None
         for frame in frames:
-            if pipeline.process(frame) and pipeline.last_result is not None and pipeline.last_result.sample is not None:
-                samples.append(pipeline.last_result.sample)
+            # pipeline.last_sample is the sample the estimator was just updated with (it stays
+            # set while the pipeline holds an estimate: record each one once).
+            if pipeline.process(frame) and pipeline.last_sample is not None and pipeline.last_sample is not previous:
+                previous = pipeline.last_sample
+                samples.append(previous)
     return config, samples
 
 

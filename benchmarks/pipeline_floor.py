@@ -6,7 +6,7 @@ it as a candump log, then times in the same process:
   floor:  python-can's reader over the log + cantools decoding of the input frames;
   replay: the full `frictiond replay` pipeline over the same log (without writing output).
 
-    python benchmarks/pipeline_floor.py [--minutes 10] [--load 0.5]
+    python benchmarks/pipeline_floor.py [--minutes 10] [--load 0.5] [--log drive.log]
 """
 from __future__ import annotations
 
@@ -74,14 +74,25 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--minutes", type=float, default=10.0)
     parser.add_argument("--load", type=float, default=0.5)
+    parser.add_argument("--log", type=Path, help="keep the drive in this .log (reused when it exists)")
     args = parser.parse_args(argv)
     config = default_config()
     with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp) / "drive.log"
+        log = args.log or Path(tmp) / "drive.log"
         t0 = time.perf_counter()
-        n_frames, span = build_log(log, args.minutes, args.load)
-        print(f"log: {n_frames} frames, {span / 60:.1f} min of bus time, {log.stat().st_size / 1e6:.1f} MB "
-              f"(built in {time.perf_counter() - t0:.1f} s)")
+        if args.log is not None and log.exists():
+            first = last = None
+            n_frames = 0
+            for frame in read_log(log):
+                first = frame.time_s if first is None else first
+                last = frame.time_s
+                n_frames += 1
+            span = (last or 0.0) - (first or 0.0)
+            built = "reused"
+        else:
+            n_frames, span = build_log(log, args.minutes, args.load)
+            built = f"built in {time.perf_counter() - t0:.1f} s"
+        print(f"log: {n_frames} frames, {span / 60:.1f} min of bus time, {log.stat().st_size / 1e6:.1f} MB ({built})")
         input_ids = set(input_codec_for(config).input_ids)
         t0 = time.perf_counter()
         decoded = floor_pass(log, config.can.dbc[0], input_ids)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import stat
 import types
 import typing
 from dataclasses import dataclass, field
@@ -145,7 +146,10 @@ def _coerce(key: str, value: Any, tp: Any, base: Path) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{key}: must be a number, got {value!r}")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:   # a YAML integer of hundreds of digits
+            raise ConfigError(f"{key}: must be a finite number, got an integer of {len(str(value))} digits") from None
         if not math.isfinite(value):
             raise ConfigError(f"{key}: must be a finite number, got {value!r}")
         return value
@@ -213,9 +217,27 @@ def _build_can(data: Any, base: Path) -> CanConfig:
     section = _build_section(CanConfig, data, "can", base)
     for path in paths + (section.output_dbc,):
         key = "can.dbc" if path in paths else "can.output_dbc"
-        if not path.is_file():
-            raise ConfigError(f"{key}: {path}: no such file")
+        _check_regular_file(key, path)
     return dataclasses.replace(section, dbc=paths)
+
+
+def _check_regular_file(key: str, path: Path) -> None:
+    """A readable-looking regular file, or a ConfigError (never an OSError, never a FIFO that blocks)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise ConfigError(f"{key}: {path}: no such file") from None
+    except ValueError:   # a NUL byte in the path
+        raise ConfigError(f"{key}: {_short(path)!r}: not a usable file path") from None
+    except OSError as exc:
+        raise ConfigError(f"{key}: {_short(path)}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):
+        raise ConfigError(f"{key}: {_short(path)}: not a regular file")
+
+
+def _short(path: Path) -> str:
+    text = str(path)
+    return text if len(text) <= 120 else text[:60] + "…" + text[-40:]
 
 
 def _build_signals(data: Any) -> dict[str, SignalSource]:
@@ -302,12 +324,17 @@ def load_config(path: Path | str) -> Config:
     """Read and validate a YAML config file. Raises `ConfigError` naming the problem."""
     path = Path(path)
     try:
-        if path.is_dir():
+        mode = path.stat().st_mode
+        if stat.S_ISDIR(mode):
             raise ConfigError(f"{path}: is a directory, not a config file")
+        if not stat.S_ISREG(mode):   # a FIFO or device would block the read or never end
+            raise ConfigError(f"{path}: not a regular file")
         with open(path, "rb") as fh:
             raw = fh.read(MAX_CONFIG_BYTES + 1)
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such config file") from None
+    except ValueError:   # a NUL byte in the path
+        raise ConfigError(f"{str(path)!r}: not a usable file path") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from None
     if len(raw) > MAX_CONFIG_BYTES:
@@ -322,8 +349,8 @@ def load_config(path: Path | str) -> Config:
         mark = exc.problem_mark
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         raise ConfigError(f"{path}: invalid YAML{where}: {exc.problem}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {exc}") from None
+    except yaml.YAMLError as exc:   # e.g. ReaderError: its text spans lines; the contract is one line
+        raise ConfigError(f"{path}: invalid YAML: {' '.join(str(exc).split())}") from None
     except RecursionError:
         raise ConfigError(f"{path}: YAML nested too deeply") from None
     try:

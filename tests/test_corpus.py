@@ -26,11 +26,8 @@ CORPUS = Path(__file__).resolve().parent / "corpus"
 FILES = sorted((CORPUS / "configs").glob("*.yaml"))
 DBCS = sorted((CORPUS / "dbc").glob("*.dbc"))
 
-# Corpus files that still crash instead of exiting 78 (see the bug list in the fault report).
-KNOWN_BUGS = {
-    "mass_huge_integer": "BUG: config.py _coerce: float(10**400) raises OverflowError (traceback, not exit 78)",
-    "dbc_path_too_long": "BUG: config.py _build_can: Path.is_file() raises OSError ENAMETOOLONG (traceback, not exit 78)",
-}
+# Corpus files that still crash instead of exiting 78 (none at present; an entry marks a strict xfail).
+KNOWN_BUGS: dict[str, str] = {}
 
 
 def header(path: Path) -> tuple[str, str]:
@@ -157,8 +154,6 @@ def test_unreadable_file_behind_a_fifo_name_does_not_hang(tmp_path, config_dict)
         load_config(write_config(tmp_path, config_dict))
 
 
-@pytest.mark.xfail(strict=True, raises=subprocess.TimeoutExpired,
-                   reason="BUG: config.py load_config open()s a FIFO and blocks forever (is_dir check only)")
 def test_config_that_is_a_fifo_does_not_hang(tmp_path):
     fifo = tmp_path / "cfg.yaml"
     os.mkfifo(fifo)
@@ -177,8 +172,7 @@ def test_config_that_is_a_fifo_does_not_hang(tmp_path):
     pytest.param("can: !!python/object/new:os.system [touch /tmp/pwned]\n", "invalid YAML", id="python-new"),
     pytest.param("%YAML 9.9\n---\na: 1\n", "invalid YAML", id="yaml-version"),
     pytest.param("\ufeffcan: 1\nvehicle: {}\nsignals: {}\n", "can: must be a mapping", id="bom"),
-    pytest.param("can: \x00\x01\x02\n", "invalid YAML", id="control-chars", marks=pytest.mark.xfail(
-        strict=True, reason="BUG: config.py load_config: yaml ReaderError text has a newline -> two stderr lines")),
+    pytest.param("can: \x00\x01\x02\n", "invalid YAML", id="control-chars"),
 ])
 def test_generated_hostile_yaml(tmp_path, text, needle):
     path = tmp_path / "cfg.yaml"

@@ -90,45 +90,53 @@ class FrontEndResult:
 
 
 class _MessageHistory:
-    """The last few values of one input message, for interpolation and staleness."""
+    """The last few values of one input message, for interpolation and staleness.
 
-    __slots__ = ("times", "values", "period_s", "last_arrival_s", "merged")
+    Each signal keeps its own (time, value) series: a multiplexed message carries only some of
+    its signals per frame, and a page's value must keep the time of the frame that carried it.
+    """
+
+    __slots__ = ("times", "series", "period_s", "last_arrival_s", "merged")
 
     def __init__(self, period_s: float) -> None:
         self.times: deque[float] = deque(maxlen=16)
-        self.values: deque[dict[str, float]] = deque(maxlen=16)
+        self.series: dict[str, tuple[deque[float], deque[float]]] = {}
         self.period_s = period_s
         self.last_arrival_s = -math.inf
         self.merged: dict[str, float] = {}
 
     def push(self, time_s: float, values: Mapping[str, float]) -> None:
+        series = self.series
         if self.times and time_s < self.times[-1]:
             # Time went backwards (log splice, clock step): the old history means nothing now.
             self.times.clear()
-            self.values.clear()
-        # Multiplexed messages deliver part of their signals per frame: keep the rest.
-        self.merged = {**self.merged, **values}
+            series.clear()
+        merged = self.merged
+        for name, value in values.items():
+            merged[name] = value
+            pair = series.get(name)
+            if pair is None:
+                pair = series[name] = (deque(maxlen=16), deque(maxlen=16))
+            pair[0].append(time_s)
+            pair[1].append(value)
         self.times.append(time_s)
-        self.values.append(self.merged)
         self.last_arrival_s = time_s
 
     def value_at(self, time_s: float, name: str) -> float | None:
-        times = self.times
-        if not times:
+        pair = self.series.get(name)
+        if pair is None:
             return None
+        times, values = pair
         if time_s >= times[-1]:
-            return self.values[-1].get(name)
+            return values[-1]
         for k in range(len(times) - 1, 0, -1):
             t0 = times[k - 1]
             if t0 <= time_s:
                 t1 = times[k]
-                v0 = self.values[k - 1].get(name)
-                v1 = self.values[k].get(name)
-                if v0 is None or v1 is None:
-                    return v1 if v1 is not None else v0
+                v0 = values[k - 1]
                 w = (time_s - t0) / (t1 - t0) if t1 > t0 else 1.0
-                return v0 + w * (v1 - v0)
-        return self.values[0].get(name)
+                return v0 + w * (values[k] - v0)
+        return values[0]
 
 
 class FrontEnd:

@@ -148,9 +148,6 @@ def test_example_car_through_the_cli(tmp_path, scenario):
     assert max(errors) < 0.1, max(errors)
 
 
-@pytest.mark.xfail(strict=True, reason="frontend._MessageHistory merges multiplexer pages and stamps a page's "
-                   "held value with the newest frame's time: per-wheel pressures at 50 Hz lag by up to 15 ms "
-                   "(MAE dry 0.047 vs 0.009 with the same pressures unmultiplexed at 50 Hz)")
 def test_multiplexed_wheel_pressures_cost_no_accuracy():
     maes = {}
     for path in (EXAMPLE, DEFAULT):

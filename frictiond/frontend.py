@@ -37,6 +37,8 @@ OPTIONAL_INPUTS = ("yaw_rate", "vehicle_speed_ref") + DRIVE_TORQUE_NAMES
 # Plausibility limits of physical inputs; beyond them a sensor is broken, not the road special.
 MAX_WHEEL_SPEED_RADPS = 400.0
 MAX_ABS_ACCEL_MPS2 = 30.0
+FREE_ROLLING_SPREAD = 0.04     # relative wheel-speed spread a curve can explain without any slip
+FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
 MAX_PRESSURE_BAR = 350.0
 MAX_SPEED_MPS = 120.0
 
@@ -380,8 +382,16 @@ class FrontEnd:
         self._last_sample_time_s = t_c
         if self._unexplained_s > 0.1:
             return FrontEndResult(None, stale, "brake pressure implausible")
-        speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, braking or driving)
-        if not braking and not driving:
+        # No pressure is not yet free rolling: wheels released by the ABS (pressure below the
+        # threshold on a low-μ road) may still be spinning back up from deep slip, all together.
+        # Only wheels that agree with each other (within what a curve explains) and accelerate
+        # with the body read the ground speed.
+        fastest = max(wheel_linear)
+        free_rolling = (not braking and not driving
+                        and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
+                        and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot))
+        speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
+        if free_rolling:
             self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
 
         yaw_rate = self._value("yaw_rate", t_c) if self._has_yaw_rate else None

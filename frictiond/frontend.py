@@ -186,6 +186,7 @@ class FrontEnd:
         self._speed_estimate_mps: float | None = None
         self._speed_time_s: float | None = None
         self._accel_bias_mps2 = 0.0
+        self._accel_bias_samples = 0
         self._brake_gain_factor = 1.0
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
@@ -515,6 +516,10 @@ class FrontEnd:
         alpha = min(1.0, self.options.default_period / max(self.options.accel_bias_time_constant, 1e-3))
         error = accel_long_raw - wheel_accel
         if abs(error) < 2.0:
+            # The plain mean of the first samples, then the exponential forgetting: right after
+            # start-up the offset is known after a second of rolling, not only after several τ.
+            self._accel_bias_samples += 1
+            alpha = max(alpha, 1.0 / self._accel_bias_samples)
             self._accel_bias_mps2 += alpha * (error - self._accel_bias_mps2)
 
     def _update_brake_gain(

@@ -215,6 +215,7 @@ class LugreTrustRegionEstimator:
         self._last_peak_slips: np.ndarray | None = None
         self._slip_support: np.ndarray | None = None
         self._capped: np.ndarray | None = None
+        self._slip_floor = np.zeros(N_WHEELS)
         self._excited_since_s = math.inf
         self._last_update_s: float | None = None
         self._cov: np.ndarray | None = None
@@ -387,14 +388,21 @@ class LugreTrustRegionEstimator:
         # μ_max is read at that slip instead of at a "peak" near lock.
         if self._fits % o.excitation_every == 1 or self._slip_support is None:
             self._slip_support = self._high_slips(slip, wheel, weights)
+            self._slip_floor = self._low_slips(slip, wheel, weights)
         cap = self._slip_support * o.peak_extrapolation
         beyond = wheel_lam > cap
-        self._capped = beyond
-        if beyond.any():
+        # The other side: data that only ever sit far past the fitted peak (a road whose μ keeps
+        # creeping up to high slip, an ABS that holds the wheels there) say nothing of a hump
+        # the model puts at small slips; μ_max is read where the data begin instead.
+        floor = self._slip_floor / o.peak_extrapolation
+        below = wheel_lam < floor
+        self._capped = beyond | below
+        if self._capped.any():
+            limit = np.where(beyond, cap, floor)
             capped = np.empty((N_WHEELS, 4))
-            mu_cap = braking_mu_and_partials(cap, np.full(N_WHEELS, v_eval), thetas, p, capped)
-            wheel_mu = np.where(beyond, np.minimum(mu_cap, wheel_mu), wheel_mu)
-            wheel_lam = np.where(beyond, cap, wheel_lam)
+            mu_cap = braking_mu_and_partials(limit, np.full(N_WHEELS, v_eval), thetas, p, capped)
+            wheel_mu = np.where(self._capped, np.minimum(mu_cap, wheel_mu), wheel_mu)
+            wheel_lam = np.where(self._capped, limit, wheel_lam)
         # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
         jac = np.empty((N_WHEELS, 4))
         braking_mu_and_partials(wheel_lam, np.full(N_WHEELS, v_eval), thetas, p, jac)
@@ -530,6 +538,17 @@ class LugreTrustRegionEstimator:
             sel = slip[recent & (wheel == i)]
             if len(sel) >= 10:
                 out[i] = float(np.quantile(sel, 0.9))
+        return out
+
+    def _low_slips(self, slip, wheel, weights) -> np.ndarray:
+        """The low end (10 %) of each wheel's recent slips (0 for a wheel without data)."""
+        o = self.options
+        recent = weights > math.exp(-o.excitation_window_s / o.forgetting_time_constant)
+        out = np.zeros(N_WHEELS)
+        for i in range(N_WHEELS):
+            sel = slip[recent & (wheel == i)]
+            if len(sel) >= 10:
+                out[i] = max(0.0, float(np.quantile(sel, 0.1)))
         return out
 
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:

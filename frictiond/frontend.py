@@ -58,7 +58,10 @@ class FrontEndOptions:
     reorder_window: float = 0.05          # s; an older wheel-speed frame within this is skipped, not a restart
     speed_gain_up: float = 0.3            # observer gain when wheels read faster than the estimate
     speed_gain_down: float = 0.02         # ... and when even the fastest wheel reads too slow
-    min_braked_slip: float = 0.15         # under ABS the least-braked wheel slips less than this
+    # Under braking even the least-braked wheel slips less than this: only a bound against an
+    # accelerometer gone wrong, not a speed reference (an ABS may hold every wheel at 30-40 %
+    # slip on a road whose peak is there; a tighter bound drags the speed and every slip low).
+    min_braked_slip: float = 0.5
     max_all_wheel_slip: float = 0.3       # ... and never all four wheels beyond this at once
     stuck_frames: int = 8                 # identical wheel-speed readings in a row that mean "stuck"
     unexplained_decel: float = 1.5        # m/s^2 of deceleration that zero brake pressure cannot explain

@@ -191,7 +191,6 @@ def braking_mu_and_partials(lam: np.ndarray, v: np.ndarray, theta: np.ndarray, p
 # through the three best fine points. Vectorised over several θ (one per wheel).
 _PEAK_GRID = np.geomspace(2e-3, MAX_MODEL_SLIP, 48)
 _FINE = np.linspace(-1.0, 1.0, 21)
-_THREE = np.array([-1.0, 0.0, 1.0])
 
 
 def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarray, np.ndarray]:
@@ -200,24 +199,12 @@ def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarr
     `near` (previous λ* per θ) skips the coarse search when the peak is still inside a ±25 %
     bracket around it — the usual case for a recursive caller whose fit moves a little per update.
     """
-    thetas = np.atleast_1d(np.asarray(thetas, dtype=float))[:, None]
     v = float(speed_mps)
     if near is not None:
-        # Two parabolic steps through three points around the previous peak; accept when the
-        # middle point is the highest (the peak is bracketed) and the step has become small.
-        lam = np.clip(np.asarray(near, dtype=float), 2e-3, 0.9 * MAX_MODEL_SLIP)
-        for h_rel in (0.08, 0.02):
-            h = (h_rel * lam)[:, None]
-            pts = lam[:, None] + h * _THREE[None, :]
-            fv = _mu_grid(pts, v, thetas, p)
-            y0, y1, y2 = fv[:, 0], fv[:, 1], fv[:, 2]
-            denom = y0 - 2 * y1 + y2
-            if not np.all((denom < 0) & (y1 >= y0) & (y1 >= y2)):
-                break
-            lam = lam + 0.5 * (y0 - y2) / denom * h[:, 0]
-        else:
-            mu_star = _mu_grid(lam[:, None], v, thetas, p)[:, 0]
-            return mu_star, lam
+        found = _peaks_near(v, p, thetas, near)
+        if found is not None:
+            return found
+    thetas = np.atleast_1d(np.asarray(thetas, dtype=float))[:, None]
     grid = _PEAK_GRID[None, :]
     values = _mu_grid(grid, v, thetas, p)
     # The tyre's peak is the first local maximum: with a large viscous term σ2·λ·v the curve
@@ -231,6 +218,51 @@ def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarr
     fine = np.clip(centre[:, None] + half * _FINE[None, :], 1e-4, MAX_MODEL_SLIP)
     fv = _mu_grid(fine, v, thetas, p)
     return _refine(fine, fv, np.argmax(fv, axis=1), v, thetas, p)
+
+
+def _peaks_near(v: float, p: LugreParams, thetas, near) -> tuple[np.ndarray, np.ndarray] | None:
+    """The bracketed refinement of `peaks` around `near`, in scalars (a handful of θ: cheaper
+    than arrays); None when some peak is not bracketed (then the caller searches the grid)."""
+    exp, expm1 = math.exp, math.expm1
+    mu_c, dmu, alpha, theta_k = p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0 * p.patch_length
+    v_ratio, s2v = v / p.v_s, p.sigma2 * v
+    low, high = 2e-3, 0.9 * MAX_MODEL_SLIP
+
+    def mu_at(lam: float, theta: float) -> float:
+        g = mu_c + dmu * exp(-((lam * v_ratio) ** alpha))
+        Z = (theta * theta_k) * lam / (g * (1.0 - lam))
+        if Z < _SMALL_Z:
+            Z = _SMALL_Z
+        return (g / theta) * (1.0 + expm1(-Z) / Z) + s2v * lam
+
+    if not (v_ratio > 0 and math.isfinite(v_ratio)):
+        return None
+    mus, lams = [], []
+    try:
+        pairs = list(zip(np.asarray(thetas, dtype=float).ravel().tolist(),
+                         np.asarray(near, dtype=float).ravel().tolist(), strict=True))
+    except ValueError:
+        return None
+    for theta, lam in pairs:
+        # Two parabolic steps through three points around the previous peak; accept when the
+        # middle point is the highest (the peak is bracketed) and the step has become small.
+        lam = min(max(lam, low), high)
+        for h_rel in (0.08, 0.02):
+            h = h_rel * lam
+            try:
+                y0, y1, y2 = mu_at(lam - h, theta), mu_at(lam, theta), mu_at(lam + h, theta)
+            except (ArithmeticError, ValueError):
+                return None
+            denom = y0 - 2 * y1 + y2
+            if not (denom < 0 and y1 >= y0 and y1 >= y2):
+                return None
+            lam = lam + 0.5 * (y0 - y2) / denom * h
+        try:
+            mus.append(mu_at(lam, theta))
+        except (ArithmeticError, ValueError):
+            return None
+        lams.append(lam)
+    return np.array(mus), np.array(lams)
 
 
 def _refine(fine, fv, j, v, thetas, p) -> tuple[np.ndarray, np.ndarray]:

@@ -34,7 +34,8 @@ import numpy as np
 
 from . import trust_region
 from .samples import FrictionEstimate, PhysicalSample, Status
-from .tyre_model import _SMALL_Z, MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta, peaks
+from .tyre_model import (_SMALL_Z, MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials,
+                         braking_mu_and_partials_few, mu_and_jacobian_theta, peaks)
 from .vehicle import VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
@@ -238,6 +239,12 @@ class LugreTrustRegionEstimator:
             d[a], d[b] = 1.0, -1.0
             ties += np.outer(d, d) / (rel * rel)
         self._tie_info = ties
+        self._inv_prior_std = 1.0 / self._prior_std
+        self._prior_rows = np.diag(self._inv_prior_std)
+        self._tie_rel_d = np.zeros((len(self._tie_a), N_WHEELS))   # rows (e_a − e_b)/rel
+        for k, (a, b, rel) in enumerate(zip(self._tie_a, self._tie_b, self._tie_rel)):
+            self._tie_rel_d[k, a], self._tie_rel_d[k, b] = 1.0 / rel, -1.0 / rel
+        self._tie_rows_t = self._tie_rel_d.T.copy()
         self._N_prior = np.diag(self._prior_info)
         self._diag_index = np.arange(n)
         self._alpha = float(o.alpha)
@@ -520,22 +527,25 @@ class LugreTrustRegionEstimator:
         else:
             fresh = rows = np.empty((w.rows.shape[0], hi - lo))
             self._rows(x, lo, hi, rows)
-        B = rows * sw
-        M = B @ B.T
+        # One product gives JᵀJ, Jᵀr and rᵀr: the weighted data rows, then the prior rows
+        # (x − prior)/std and the tie rows (θ_a − θ_b)/(rel·θ̄) appended as further columns.
+        m = hi - lo
         n = len(x)
-        N = M[:n, :n] + self._N_prior
-        grad = M[:n, n].copy()
-        dx = x - self._prior
-        grad += dx * self._prior_info
-        cost = float(M[n, n]) + float(dx @ (dx * self._prior_info))
+        B = np.empty((n + 1, m + n + N_WHEELS))
+        np.multiply(rows, sw, out=B[:, :m])
+        B[:n, m:m + n] = self._prior_rows
+        np.multiply(x - self._prior, self._inv_prior_std, out=B[n, m:m + n])
         th = x[:N_WHEELS]
-        mean = max(float(th.mean()), 1e-6)
-        tie = self._tie_info * (1.0 / (mean * mean))
-        N[:N_WHEELS, :N_WHEELS] += tie
-        tie_g = tie @ th
-        grad[:N_WHEELS] += tie_g
-        cost += float(th @ tie_g)
-        return 0.5 * cost, grad, N, (fresh, B[n], x)
+        xs = th.tolist()
+        inv_mean = 1.0 / max((xs[0] + xs[1] + xs[2] + xs[3]) / N_WHEELS, 1e-6)
+        np.multiply(self._tie_rows_t, inv_mean, out=B[:N_WHEELS, m + n:])
+        B[N_WHEELS:n, m + n:] = 0.0
+        np.multiply(self._tie_rel_d @ th, inv_mean, out=B[n, m + n:])
+        M = B @ B.T
+        N = M[:n, :n]
+        grad = M[:n, n]
+        cost = float(M[n, n])
+        return 0.5 * cost, grad, N, (fresh, B[n, :m], x)
 
     def _fit(self, now_s: float, speed: float) -> FrictionEstimate:
         o = self.options
@@ -581,13 +591,11 @@ class LugreTrustRegionEstimator:
         beyond = wheel_lam > cap
         self._capped = beyond
         if beyond.any():
-            capped = np.empty((N_WHEELS, 4))
-            mu_cap = braking_mu_and_partials(cap, np.full(N_WHEELS, v_eval), thetas, p, capped)
+            mu_cap, _ = braking_mu_and_partials_few(cap, v_eval, thetas, p)
             wheel_mu = np.where(beyond, np.minimum(mu_cap, wheel_mu), wheel_mu)
             wheel_lam = np.where(beyond, cap, wheel_lam)
         # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
-        jac = np.empty((N_WHEELS, 4))
-        braking_mu_and_partials(wheel_lam, np.full(N_WHEELS, v_eval), thetas, p, jac)
+        _, jac = braking_mu_and_partials_few(wheel_lam, v_eval, thetas, p)
         G = np.zeros((N_WHEELS, len(x)))
         G[np.arange(N_WHEELS), np.arange(N_WHEELS)] = jac[:, 0] * self._scale[0]
         G[:, N_WHEELS:] = jac[:, 1:] * self._scale[N_WHEELS:]
@@ -609,8 +617,8 @@ class LugreTrustRegionEstimator:
             self._cov_unit = cov
         cov = self._cov_unit * variance_factor
         self._cov = cov
-        g_mean = G.mean(axis=0)
-        mu_max = float(np.mean(wheel_mu))
+        g_mean = G.sum(axis=0) / N_WHEELS
+        mu_max = sum(wheel_mu.tolist()) / N_WHEELS
         mu_std = math.sqrt(max(float(g_mean @ cov @ g_mean), 0.0))
         wheel_std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, cov, G), 0.0))
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
@@ -619,8 +627,8 @@ class LugreTrustRegionEstimator:
             self._excitation_cache = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, v_eval)
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
-        theta_mean = float(np.mean(thetas))
-        slip_star = float(np.mean(wheel_lam))
+        theta_mean = sum(thetas.tolist()) / N_WHEELS
+        slip_star = sum(wheel_lam.tolist()) / N_WHEELS
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
                   "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
                   "jumps": float(self._jumps)}

@@ -169,6 +169,7 @@ def solve_normal(
     ub = np.asarray(ub, dtype=float)
     fin_lb = np.isfinite(lb)
     fin_ub = np.isfinite(ub)
+    all_lb, all_ub = bool(fin_lb.all()), bool(fin_ub.all())
     # Strictly interior start: trf-style, a bound-touching start has no room to scale.
     x = np.clip(np.asarray(x0, dtype=float), lb, ub)
     span = np.where(np.isfinite(ub - lb), ub - lb, 1.0)
@@ -182,7 +183,8 @@ def solve_normal(
     converged = False
     iterations = 0
     while iterations < max_iterations:
-        v, dv = _scaling_masked(x, (g < 0) & fin_ub, (g > 0) & fin_lb, lb, ub)
+        v, dv = _scaling_masked(x, (g < 0) & fin_ub if not all_ub else g < 0,
+                                (g > 0) & fin_lb if not all_lb else g > 0, lb, ub)
         g_v = g * v
         if max(g_v.max(), -g_v.min()) < gtol:
             converged = True
@@ -210,7 +212,7 @@ def solve_normal(
             predicted = -(float(g_h @ s_h) + 0.5 * float(s_h @ H @ s_h))
             # Iterates stay as far inside as the start is put: the result, passed back in as the
             # next warm start, is then used exactly as returned.
-            x_new = np.clip(x + s, inner_lb, inner_ub)
+            x_new = np.minimum(np.maximum(x + s, inner_lb), inner_ub)
             cost_new, g_new, N_new, extra_new = fun(x_new)
             evaluations += 1
             actual = cost - cost_new

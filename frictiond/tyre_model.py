@@ -187,6 +187,42 @@ def braking_mu_and_partials(lam: np.ndarray, v: np.ndarray, theta: np.ndarray, p
     return g_over_theta * F + p.sigma2 * lam_v
 
 
+def braking_mu_and_partials_few(lam, v: float, theta, p: LugreParams) -> tuple[np.ndarray, np.ndarray]:
+    """`braking_mu_and_partials` at one speed for a handful of (λ, θ) pairs, in floats.
+
+    Returns μ (k,) and the partials (k, 4); for the few points of a peak this is much cheaper
+    than the array path.
+    """
+    exp, expm1 = math.exp, math.expm1
+    mu_c, dmu, alpha, sigma0, v_s, sigma2 = p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.v_s, p.sigma2
+    k = sigma0 * p.patch_length
+    inv_v_s, inv_sigma0, c_v_s = 1.0 / v_s, 1.0 / sigma0, alpha / v_s
+    mus, rows = [], []
+    for lam_i, theta_i in zip(np.asarray(lam, dtype=float).ravel().tolist(),
+                              np.asarray(theta, dtype=float).ravel().tolist()):
+        lam_i = min(lam_i, MAX_MODEL_SLIP)
+        lam_v = lam_i * v
+        ratio = (lam_v * inv_v_s) ** alpha if lam_v >= 0 else math.nan
+        e = exp(-ratio)
+        g = mu_c + dmu * e
+        inv_theta = 1.0 / theta_i
+        Z = theta_i * k * lam_i / (g * (1.0 - lam_i))
+        if Z < _SMALL_Z:
+            F = Z / 2.0 - Z * Z / 6.0
+            dF = 0.5 - Z / 3.0
+        else:
+            one_minus = -expm1(-Z)
+            inv_Z = 1.0 / Z
+            F = 1.0 - one_minus * inv_Z
+            dF = (one_minus - Z * exp(-Z)) * inv_Z * inv_Z
+        g_over_theta = g * inv_theta
+        ZdF = Z * dF
+        rows.append((g_over_theta * inv_theta * (ZdF - F), g_over_theta * ZdF * inv_sigma0,
+                     (F - ZdF) * inv_theta * dmu * e * c_v_s * ratio, lam_v))
+        mus.append(g_over_theta * F + sigma2 * lam_v)
+    return np.array(mus), np.array(rows).reshape(-1, 4)
+
+
 # Peak search: a fixed slip grid, then a fine grid around the best point and a parabola
 # through the three best fine points. Vectorised over several θ (one per wheel).
 _PEAK_GRID = np.geomspace(2e-3, MAX_MODEL_SLIP, 48)

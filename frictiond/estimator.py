@@ -393,9 +393,13 @@ class LugreTrustRegionEstimator:
             return 0.0
         # Back from weighted, normalised residuals to μ units (model − measurement).
         resid = r_data[recent] * o.measurement_std / np.sqrt(weights[recent])
-        noise = max(o.measurement_std, float(np.std(resid)))
-        score = abs(float(np.mean(resid))) / (noise / math.sqrt(n_recent))
-        same_sign = abs(float(np.mean(np.sign(resid))))
+        # np.mean / np.std, without their wrappers (same operations, same order).
+        mean = float(resid.sum()) / n_recent
+        dev = resid - mean
+        dev *= dev
+        noise = max(o.measurement_std, math.sqrt(float(dev.sum()) / n_recent))
+        score = abs(mean) / (noise / math.sqrt(n_recent))
+        same_sign = abs(float(np.sign(resid).sum()) / n_recent)
         return score if same_sign > 0.7 else min(score, o.jump_threshold)
 
     def _detect_jump(self, now_s: float, score: float) -> None:
@@ -711,8 +715,8 @@ class LugreTrustRegionEstimator:
         if last is None or o.axle_balance_time_constant <= 0:
             return
         dt = min(max(now_s - last, 0.0), 0.1)
-        recent = weights > math.exp(-1.0)
-        if not (np.any(recent & (wheel < 2)) and np.any(recent & (wheel >= 2))):
+        recent_wheels = wheel[weights > math.exp(-1.0)]
+        if not (len(recent_wheels) and recent_wheels.min() < 2 <= recent_wheels.max()):
             return
         ratio = float(wheel_mu[0] + wheel_mu[1]) / max(float(wheel_mu[2] + wheel_mu[3]), 1e-6)
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0

@@ -169,7 +169,6 @@ def solve_normal(
     ub = np.asarray(ub, dtype=float)
     fin_lb = np.isfinite(lb)
     fin_ub = np.isfinite(ub)
-    all_lb, all_ub = bool(fin_lb.all()), bool(fin_ub.all())
     # Strictly interior start: trf-style, a bound-touching start has no room to scale.
     x = np.clip(np.asarray(x0, dtype=float), lb, ub)
     span = np.where(np.isfinite(ub - lb), ub - lb, 1.0)
@@ -182,41 +181,71 @@ def solve_normal(
         radius = math.sqrt(float(np.sum(x * x / v))) or 1.0
     converged = False
     iterations = 0
+    # The n-vectors (a handful of entries) are handled as floats: fused loops instead of a
+    # dozen numpy calls on tiny arrays per iteration. Same operations as `_scaling` & co.
+    n = len(x)
+    sqrt = math.sqrt
+    lbl, ubl = lb.tolist(), ub.tolist()
+    fin_lbl, fin_ubl = fin_lb.tolist(), fin_ub.tolist()
+    inner_lbl, inner_ubl = inner_lb.tolist(), inner_ub.tolist()
+    diagonal = (np.arange(n), np.arange(n))
     while iterations < max_iterations:
-        v, dv = _scaling_masked(x, (g < 0) & fin_ub if not all_ub else g < 0,
-                                (g > 0) & fin_lb if not all_lb else g > 0, lb, ub)
-        g_v = g * v
-        if max(g_v.max(), -g_v.min()) < gtol:
+        xl, gl = x.tolist(), g.tolist()
+        d, g_h, g_dv = [0.0] * n, [0.0] * n, [0.0] * n
+        gv_max = gh_max = 0.0
+        nan = False
+        for i in range(n):
+            gi, xi = gl[i], xl[i]
+            if gi > 0 and fin_lbl[i]:
+                vi = xi - lbl[i]
+                g_dv[i] = gi
+            elif gi < 0 and fin_ubl[i]:
+                vi = ubl[i] - xi
+                g_dv[i] = -gi
+            else:
+                vi = 1.0
+            gv = abs(gi * vi)
+            nan = nan or gv != gv
+            gv_max = gv if gv > gv_max else gv_max
+            di = sqrt(vi) if vi > 0 else 0.0
+            d[i] = di
+            ghi = di * gi
+            g_h[i] = ghi
+            ghi = abs(ghi)
+            gh_max = ghi if ghi > gh_max else gh_max
+        if not nan and gv_max < gtol:
             converged = True
             break
-        d = np.sqrt(v)
-        g_h = d * g
-        H = N * np.multiply.outer(d, d)
-        H.flat[:: len(x) + 1] += g * dv
+        d_arr = np.array(d)
+        H = N * np.multiply.outer(d_arr, d_arr)
+        H[diagonal] += g_dv
         w, Q = np.linalg.eigh(H)
-        eig = (w, Q, g_h @ Q)
+        eig = (w, Q, np.array(g_h) @ Q)
         iterations += 1
-        theta = max(0.995, 1.0 - max(g_h.max(), -g_h.min()))
-        upper_room = theta * (ub - x)
-        lower_room = theta * (lb - x)
+        theta = max(0.995, 1.0 - gh_max)
+        upper_room = [theta * (ubl[i] - xl[i]) for i in range(n)]
+        lower_room = [theta * (lbl[i] - xl[i]) for i in range(n)]
         # Inner loop: shrink the radius until a step decreases the cost.
         for _attempt in range(max_rejections):
-            s_h = _subproblem(eig, radius)
-            s = d * s_h
+            s_h = _subproblem(eig, radius).tolist()
+            s = [d[i] * s_h[i] for i in range(n)]
             # Stay strictly inside the box: a component that would cross its bound goes a
             # fraction θ of the way there, the others keep their full length (a projected
             # step; scaling the whole step would stall the free coordinates at a bound).
-            if (s > upper_room).any() or (s < lower_room).any():
-                s = np.minimum(np.maximum(s, lower_room), upper_room)
-                s_h = s / d
-            predicted = -(float(g_h @ s_h) + 0.5 * float(s_h @ H @ s_h))
+            for i in range(n):
+                if s[i] > upper_room[i] or s[i] < lower_room[i]:
+                    s = [min(max(s[k], lower_room[k]), upper_room[k]) for k in range(n)]
+                    s_h = [s[k] / d[k] for k in range(n)]
+                    break
+            s_arr = np.array(s_h)
+            predicted = -(sum(g_h[i] * s_h[i] for i in range(n)) + 0.5 * float(s_arr @ H @ s_arr))
             # Iterates stay as far inside as the start is put: the result, passed back in as the
             # next warm start, is then used exactly as returned.
-            x_new = np.minimum(np.maximum(x + s, inner_lb), inner_ub)
+            x_new = np.array([min(max(xl[i] + s[i], inner_lbl[i]), inner_ubl[i]) for i in range(n)])
             cost_new, g_new, N_new, extra_new = fun(x_new)
             evaluations += 1
             actual = cost - cost_new
-            step_norm = math.sqrt(float(s_h @ s_h))
+            step_norm = sqrt(sum(v * v for v in s_h))
             ratio = actual / predicted if predicted > 0 else -1.0
             if ratio < 0.25:
                 radius = 0.25 * step_norm if step_norm > 0 else 0.25 * radius
@@ -224,14 +253,14 @@ def solve_normal(
                 radius *= 2.0
             if actual > 0 and math.isfinite(cost_new):
                 break
-            if radius < 1e-12 * (1.0 + math.sqrt(float(x @ x))):
+            if radius < 1e-12 * (1.0 + sqrt(sum(v * v for v in xl))):
                 return NormalResult(x, cost, g, N, extra, radius, iterations, True, evaluations)
         else:
             return NormalResult(x, cost, g, N, extra, radius, iterations, True, evaluations)
-        x_norm = math.sqrt(float(x @ x))
+        x_norm = sqrt(sum(v * v for v in xl))
         x, g, N, extra = x_new, g_new, N_new, extra_new
         small_cost = actual < ftol * cost
-        small_step = math.sqrt(float(s @ s)) < xtol * (xtol + x_norm)
+        small_step = sqrt(sum(v * v for v in s)) < xtol * (xtol + x_norm)
         cost = cost_new
         if small_cost or small_step:
             converged = True

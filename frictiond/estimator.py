@@ -545,7 +545,7 @@ class LugreTrustRegionEstimator:
         np.multiply(self._tie_rows_t, inv_mean, out=B[:N_WHEELS, m + n:])
         B[N_WHEELS:n, m + n:] = 0.0
         np.multiply(self._tie_rel_d @ th, inv_mean, out=B[n, m + n:])
-        M = B @ B.T
+        M = np.dot(B, B.T)
         N = M[:n, :n]
         grad = M[:n, n]
         cost = float(M[n, n])
@@ -600,11 +600,12 @@ class LugreTrustRegionEstimator:
             wheel_lam = np.where(beyond, cap, wheel_lam)
         # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
         _, jac = braking_mu_and_partials_few(wheel_lam, v_eval, thetas, p)
-        G = np.zeros((N_WHEELS, len(x)))
-        G[np.arange(N_WHEELS), np.arange(N_WHEELS)] = jac[:, 0] * self._scale[0]
-        G[:, N_WHEELS:] = jac[:, 1:] * self._scale[N_WHEELS:]
+        s0 = float(self._scale[0])
+        sc4, sc5, sc6 = self._shared_scale
+        G = np.array([[0.0] * i + [j[0] * s0] + [0.0] * (N_WHEELS - 1 - i) + [j[1] * sc4, j[2] * sc5, j[3] * sc6]
+                      for i, j in enumerate(jac.tolist())])
         # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
-        w_sum = float(np.sum(weights))
+        w_sum = float(weights.sum())
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, float(r_data @ r_data) / dof)
         if self._cov is None or self._fits % o.excitation_every == 1 or o.excitation_every <= 1:
@@ -624,7 +625,7 @@ class LugreTrustRegionEstimator:
         g_mean = G.sum(axis=0) / N_WHEELS
         mu_max = sum(wheel_mu.tolist()) / N_WHEELS
         mu_std = math.sqrt(max(float(g_mean @ cov @ g_mean), 0.0))
-        wheel_std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, cov, G), 0.0))
+        wheel_std = [math.sqrt(max(v, 0.0)) if v == v else v for v in (np.dot(G, cov) * G).sum(axis=1).tolist()]
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
         if self._fits % o.excitation_every == 1 or o.excitation_every <= 1 or self._excitation_cache is None:

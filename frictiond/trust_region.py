@@ -93,6 +93,30 @@ def _subproblem(eig: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float) -
     return -(Q @ (a / (w + lam)))
 
 
+_BOXES: dict[bytes, tuple] = {}
+
+
+def _box(lb, ub) -> tuple:
+    """The bounds and what the solver derives from them, as arrays and floats (cached: a
+    recursive caller passes the same bounds every time)."""
+    lb = np.asarray(lb, dtype=float)
+    ub = np.asarray(ub, dtype=float)
+    key = lb.tobytes() + b"|" + ub.tobytes()
+    box = _BOXES.get(key)
+    if box is None:
+        lb, ub = lb.copy(), ub.copy()   # the caller may change its arrays later
+        fin_lb = np.isfinite(lb)
+        fin_ub = np.isfinite(ub)
+        span = np.where(np.isfinite(ub - lb), ub - lb, 1.0)
+        inner_lb, inner_ub = lb + 1e-10 * span, ub - 1e-10 * span
+        box = (lb, ub, fin_lb, fin_ub, inner_lb, inner_ub, lb.tolist(), ub.tolist(), fin_lb.tolist(),
+               fin_ub.tolist(), inner_lb.tolist(), inner_ub.tolist())
+        if len(_BOXES) >= 64:
+            _BOXES.clear()
+        _BOXES[key] = box
+    return box
+
+
 NormalFunction = Callable[[np.ndarray], tuple[float, np.ndarray, np.ndarray, object]]
 
 
@@ -165,15 +189,10 @@ def solve_normal(
     for a caller that can form JᵀJ and Jᵀr more cheaply than the full Jacobian; `extra` is
     handed back with the accepted point (e.g. the residuals).
     """
-    lb = np.asarray(lb, dtype=float)
-    ub = np.asarray(ub, dtype=float)
-    fin_lb = np.isfinite(lb)
-    fin_ub = np.isfinite(ub)
+    lb, ub, fin_lb, fin_ub, inner_lb, inner_ub, lbl, ubl, fin_lbl, fin_ubl, inner_lbl, inner_ubl = _box(lb, ub)
     # Strictly interior start: trf-style, a bound-touching start has no room to scale.
-    x = np.clip(np.asarray(x0, dtype=float), lb, ub)
-    span = np.where(np.isfinite(ub - lb), ub - lb, 1.0)
-    inner_lb, inner_ub = lb + 1e-10 * span, ub - 1e-10 * span
-    x = np.clip(x, inner_lb, inner_ub)
+    x = np.array([min(max(min(max(v, lo), hi), ilo), ihi)
+                  for v, lo, hi, ilo, ihi in zip(np.asarray(x0, dtype=float).tolist(), lbl, ubl, inner_lbl, inner_ubl)])
     cost, g, N, extra = initial if initial is not None else fun(x)
     evaluations = 1
     if radius is None or not math.isfinite(radius) or radius <= 0:
@@ -185,9 +204,6 @@ def solve_normal(
     # dozen numpy calls on tiny arrays per iteration. Same operations as `_scaling` & co.
     n = len(x)
     sqrt = math.sqrt
-    lbl, ubl = lb.tolist(), ub.tolist()
-    fin_lbl, fin_ubl = fin_lb.tolist(), fin_ub.tolist()
-    inner_lbl, inner_ubl = inner_lb.tolist(), inner_ub.tolist()
     diagonal = (np.arange(n), np.arange(n))
     while iterations < max_iterations:
         xl, gl = x.tolist(), g.tolist()

@@ -251,7 +251,7 @@ def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarr
     hi = _PEAK_GRID[np.minimum(i + 1, len(_PEAK_GRID) - 1)]
     centre = _PEAK_GRID[i]
     half = np.maximum(centre - lo, hi - centre)[:, None]
-    fine = np.clip(centre[:, None] + half * _FINE[None, :], 1e-4, MAX_MODEL_SLIP)
+    fine = np.minimum(np.maximum(centre[:, None] + half * _FINE[None, :], 1e-4), MAX_MODEL_SLIP)
     fv = _mu_grid(fine, v, thetas, p)
     return _refine(fine, fv, np.argmax(fv, axis=1), v, thetas, p)
 
@@ -303,7 +303,7 @@ def _peaks_near(v: float, p: LugreParams, thetas, near) -> tuple[np.ndarray, np.
 
 def _refine(fine, fv, j, v, thetas, p) -> tuple[np.ndarray, np.ndarray]:
     """Parabola through the best fine-grid point and its neighbours."""
-    j = np.clip(j, 1, fine.shape[1] - 2)
+    j = np.minimum(np.maximum(j, 1), fine.shape[1] - 2)
     rows = np.arange(len(j))
     y0, y1, y2 = fv[rows, j - 1], fv[rows, j], fv[rows, j + 1]
     x1 = fine[rows, j]
@@ -311,8 +311,8 @@ def _refine(fine, fv, j, v, thetas, p) -> tuple[np.ndarray, np.ndarray]:
     denom = y0 - 2 * y1 + y2
     with np.errstate(divide="ignore", invalid="ignore"):
         shift = np.where(denom < 0, 0.5 * (y0 - y2) / denom, 0.0)
-    shift = np.clip(shift, -1.0, 1.0)
-    lam_star = np.clip(x1 + shift * h, 1e-4, MAX_MODEL_SLIP)
+    shift = np.minimum(np.maximum(shift, -1.0), 1.0)
+    lam_star = np.minimum(np.maximum(x1 + shift * h, 1e-4), MAX_MODEL_SLIP)
     # Evaluate at the refined slip rather than trusting the parabola's height (at the edge of
     # the slip range the curve is not a parabola).
     mu_star = _mu_grid(lam_star[:, None], v, thetas, p)[:, 0]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import errno
+import gc
 import logging
 import math
 import signal
@@ -451,6 +452,11 @@ class Daemon:
         wd_interval = self.notifier.watchdog_interval_s
         next_wd = now
         wd_rx = 0
+        # Everything built so far (codecs, databases, config) lives as long as the daemon: keep it
+        # out of the cyclic collector's full passes, which would otherwise walk it in the middle
+        # of a frame's handling every so often.
+        gc.collect()
+        gc.freeze()
         self.notifier.ready(self.status_text())
         self.running.set()
         log.info("running (watchdog %s)", f"every {wd_interval:.1f} s" if wd_interval else "off")

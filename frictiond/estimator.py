@@ -34,7 +34,8 @@ import numpy as np
 
 from . import trust_region
 from .samples import FrictionEstimate, PhysicalSample, Status
-from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta, peaks
+from .tyre_model import (_SMALL_Z, MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials,
+                         braking_mu_and_partials_few, mu_and_jacobian_theta, peaks)
 from .vehicle import VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
@@ -122,35 +123,74 @@ class LugreTROptions:
             raise ValueError("theta_min: must be > 0")
 
 
-class _Window:
-    """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append."""
+def _quantile(values: np.ndarray, q: float) -> float:
+    """`np.quantile(values, q)` (linear method, finite values), by one partition."""
+    n = len(values)
+    virtual = (n - 1) * q
+    i = min(int(math.floor(virtual)), n - 1)
+    if i >= n - 1:
+        return float(np.max(values))
+    part = np.partition(values, (i, i + 1))
+    a, b = float(part[i]), float(part[i + 1])
+    t = virtual - i
+    diff = b - a
+    return b - diff * (1 - t) if t >= 0.5 else a + diff * t
 
-    def __init__(self, capacity: int = 4096) -> None:
+
+class _Window:
+    """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append.
+
+    Next to each sample it keeps the parts of the model that depend on the sample alone (with
+    the held α and L): λ·v, (λ·v)^α, L·λ/(1−λ) and the wheel as a one-hot column; and, in
+    `rows`, the unweighted Jacobian row and model − measurement of each sample at the
+    parameters of the last accepted fit (valid for the samples before `cached_end`).
+    """
+
+    def __init__(self, capacity: int = 4096, alpha: float = 0.5, patch_length: float = 0.2) -> None:
         self.capacity = capacity
+        self.alpha = alpha
+        self.patch_length = patch_length
         self.slip = np.empty(capacity)
         self.speed = np.empty(capacity)
         self.mu = np.empty(capacity)
         self.time = np.empty(capacity)
         self.wheel = np.empty(capacity, dtype=np.intp)
+        self.lam_v = np.empty(capacity)
+        self.pow_lam_v = np.empty(capacity)
+        self.stiff = np.empty(capacity)
+        self.onehot = np.zeros((N_WHEELS, capacity))
+        self.rows = np.empty((N_WHEELS + len(SHARED) + 1, capacity))
         self.start = 0
         self.end = 0
+        self.cached_end = 0
 
     def __len__(self) -> int:
         return self.end - self.start
 
     def clear(self) -> None:
-        self.start = self.end = 0
+        self.start = self.end = self.cached_end = 0
 
     def append(self, slip: float, speed: float, mu: float, time_s: float, wheel: int) -> None:
         if self.end == self.capacity:
             n = len(self)
-            for arr in (self.slip, self.speed, self.mu, self.time, self.wheel):
-                arr[:n] = arr[self.start:self.end]
+            s, e = self.start, self.end
+            for arr in (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v, self.stiff):
+                arr[:n] = arr[s:e]
+            self.onehot[:, :n] = self.onehot[:, s:e]
+            self.rows[:, :n] = self.rows[:, s:e]
+            self.cached_end = max(self.cached_end - s, 0)
             self.start, self.end = 0, n
             if n == self.capacity:  # full: drop the oldest quarter
                 self.drop_before(self.time[self.capacity // 4])
         k = self.end
         self.slip[k], self.speed[k], self.mu[k], self.time[k], self.wheel[k] = slip, speed, mu, time_s, wheel
+        lam = min(slip, MAX_MODEL_SLIP)
+        lam_v = lam * speed
+        self.lam_v[k] = lam_v
+        self.pow_lam_v[k] = lam_v**self.alpha if lam_v > 0 else 0.0
+        self.stiff[k] = self.patch_length * lam / (1.0 - lam)
+        self.onehot[:, k] = 0.0
+        self.onehot[wheel, k] = 1.0
         self.end += 1
 
     def drop_before(self, time_s: float) -> None:
@@ -189,6 +229,26 @@ class LugreTrustRegionEstimator:
         if self._scale[0] != 1.0:
             raise AssertionError("θ is fitted unscaled")
         self._work: np.ndarray | None = None
+        # The priors and ties in normal-equation form (see `_normal`): the prior rows
+        # (x − prior)/std give diag(1/std²); the tie rows (θ_a − θ_b)/(rel·θ̄) give C/θ̄².
+        n = len(self._scale)
+        self._prior_info = 1.0 / self._prior_std**2
+        ties = np.zeros((N_WHEELS, N_WHEELS))
+        for a, b, rel in zip(self._tie_a, self._tie_b, self._tie_rel):
+            d = np.zeros(N_WHEELS)
+            d[a], d[b] = 1.0, -1.0
+            ties += np.outer(d, d) / (rel * rel)
+        self._tie_info = ties
+        self._inv_prior_std = 1.0 / self._prior_std
+        self._prior_rows = np.diag(self._inv_prior_std)
+        self._tie_rel_d = np.zeros((len(self._tie_a), N_WHEELS))   # rows (e_a − e_b)/rel
+        for k, (a, b, rel) in enumerate(zip(self._tie_a, self._tie_b, self._tie_rel)):
+            self._tie_rel_d[k, a], self._tie_rel_d[k, b] = 1.0 / rel, -1.0 / rel
+        self._tie_rows_t = self._tie_rel_d.T.copy()
+        self._N_prior = np.diag(self._prior_info)
+        self._diag_index = np.arange(n)
+        self._alpha = float(o.alpha)
+        self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
         self._prior_peak: tuple[float, tuple] | None = None
         self.reset()
 
@@ -199,7 +259,8 @@ class LugreTrustRegionEstimator:
         self._prior = self._saved_prior.copy() if self._saved_prior is not None else nominal
         self._x = self._prior.copy()
         self._radius: float | None = None
-        self._window = _Window()
+        self._window = _Window(alpha=o.alpha, patch_length=o.patch_length)
+        self._cache_x: np.ndarray | None = None
         self._last_valid: FrictionEstimate | None = None
         self._last_excited_s = -math.inf
         self._last_estimate: FrictionEstimate | None = None
@@ -333,9 +394,13 @@ class LugreTrustRegionEstimator:
             return 0.0
         # Back from weighted, normalised residuals to μ units (model − measurement).
         resid = r_data[recent] * o.measurement_std / np.sqrt(weights[recent])
-        noise = max(o.measurement_std, float(np.std(resid)))
-        score = abs(float(np.mean(resid))) / (noise / math.sqrt(n_recent))
-        same_sign = abs(float(np.mean(np.sign(resid))))
+        # np.mean / np.std, without their wrappers (same operations, same order).
+        mean = float(resid.sum()) / n_recent
+        dev = resid - mean
+        dev *= dev
+        noise = max(o.measurement_std, math.sqrt(float(dev.sum()) / n_recent))
+        score = abs(mean) / (noise / math.sqrt(n_recent))
+        same_sign = abs(float(np.sign(resid).sum()) / n_recent)
         return score if same_sign > 0.7 else min(score, o.jump_threshold)
 
     def _detect_jump(self, now_s: float, score: float) -> None:
@@ -352,29 +417,168 @@ class LugreTrustRegionEstimator:
             self._excitation_cache = None
             self._mu_history.clear()
 
+    def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
+        """Unweighted Jacobian rows and model − measurement of window samples [lo, hi) at x.
+
+        `out` (8, hi − lo): rows 0–3 ∂μ/∂θ_wheel (one-hot), 4–6 ∂μ/∂(σ0, v_s, σ2) in the scaled
+        variables, 7 μ_model − μ_meas. The formulas of `braking_mu_and_partials`, on the
+        window's precomputed per-sample columns.
+        """
+        w = self._window
+        b = self._base
+        sc4, sc5, sc6 = self._shared_scale
+        sigma0, v_s, sigma2 = float(x[4]) * sc4, float(x[5]) * sc5, float(x[6]) * sc6
+        thetas = x[:N_WHEELS]
+        wheel = w.wheel[lo:hi]
+        alpha = self._alpha
+        dmu = b.mu_s - b.mu_c
+        ratio = w.pow_lam_v[lo:hi] * v_s**-alpha
+        e = np.exp(-ratio)
+        g = e * dmu
+        g += b.mu_c
+        inv_t = (1.0 / thetas)[wheel]
+        Z = (thetas * sigma0)[wheel]
+        Z *= w.stiff[lo:hi]
+        Z /= g
+        if hi > lo and Z.min() < _SMALL_Z:
+            partials = np.empty((hi - lo, 4))
+            lv = w.lam_v[lo:hi]
+            lam = np.minimum(w.slip[lo:hi], MAX_MODEL_SLIP)
+            speed = np.divide(lv, lam, out=np.array(w.speed[lo:hi]), where=lam > 0)
+            model = braking_mu_and_partials(lam, speed, thetas[wheel], self._params(x), partials)
+            np.multiply(w.onehot[:, lo:hi], partials[:, 0], out=out[:N_WHEELS])
+            out[4] = partials[:, 1] * sc4
+            out[5] = partials[:, 2] * sc5
+            out[6] = partials[:, 3] * sc6
+            np.subtract(model, w.mu[lo:hi], out=out[7])
+            return
+        om = np.expm1(-Z)
+        om *= -1.0                      # 1 − e^(−Z)
+        iz = 1.0 / Z
+        F = 1.0 - om * iz
+        ZdF = om * (1.0 + Z)
+        ZdF -= Z
+        ZdF *= iz                       # Z·F'(Z)
+        FmZ = F - ZdF
+        gt = g * inv_t
+        a0 = gt * inv_t
+        a0 *= FmZ
+        np.multiply(w.onehot[:, lo:hi], a0, out=out[:N_WHEELS])
+        out[:N_WHEELS] *= -1.0
+        np.multiply(gt, ZdF, out=out[4])
+        out[4] *= sc4 / sigma0
+        np.multiply(FmZ, inv_t, out=out[5])
+        out[5] *= e
+        out[5] *= ratio
+        out[5] *= dmu * alpha / v_s * sc5
+        lv = w.lam_v[lo:hi]
+        np.multiply(lv, sc6, out=out[6])
+        np.multiply(gt, F, out=out[7])
+        out[7] += sigma2 * lv
+        out[7] -= w.mu[lo:hi]
+
+    def _rows_few(self, x: np.ndarray, lo: int, hi: int) -> None:
+        """`_rows` for the few samples an update adds, into the window's row cache, in floats."""
+        w = self._window
+        b = self._base
+        sc4, sc5, sc6 = self._shared_scale
+        xs = x.tolist()
+        sigma0, v_s, sigma2 = xs[4] * sc4, xs[5] * sc5, xs[6] * sc6
+        alpha = self._alpha
+        dmu, mu_c = b.mu_s - b.mu_c, b.mu_c
+        v_pow = v_s**-alpha
+        k4 = sc4 / sigma0
+        k5 = dmu * alpha / v_s * sc5
+        exp, expm1 = math.exp, math.expm1
+        cols = []
+        for j in range(lo, hi):
+            wi = int(w.wheel[j])
+            th = xs[wi]
+            ratio = float(w.pow_lam_v[j]) * v_pow
+            e = exp(-ratio)
+            g = e * dmu + mu_c
+            inv_t = 1.0 / th
+            Z = (th * sigma0) * float(w.stiff[j]) / g
+            if not Z >= _SMALL_Z:
+                self._rows(x, lo, hi, w.rows[:, lo:hi])
+                return
+            om = -expm1(-Z)
+            iz = 1.0 / Z
+            F = 1.0 - om * iz
+            ZdF = (om * (1.0 + Z) - Z) * iz
+            FmZ = F - ZdF
+            gt = g * inv_t
+            lv = float(w.lam_v[j])
+            col = [0.0] * N_WHEELS + [gt * ZdF * k4, FmZ * inv_t * e * ratio * k5, lv * sc6,
+                                      gt * F + sigma2 * lv - float(w.mu[j])]
+            col[wi] = -(gt * inv_t * FmZ)
+            cols.append(col)
+        if cols:
+            w.rows[:, lo:hi] = np.array(cols).T
+
+    def _normal(self, x: np.ndarray, sw: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, tuple]:
+        """½‖r‖², Jᵀr and JᵀJ of `_residuals` (data rows weighted by `sw`, priors, ties) at x."""
+        w = self._window
+        lo, hi = w.start, w.end
+        cache_x = self._cache_x
+        if cache_x is not None and w.cached_end > lo and (x == cache_x).all():
+            # The rows of the samples already in the window were computed at this x by the
+            # last update (its accepted point): only the new samples' rows are missing.
+            if w.cached_end < hi:
+                self._rows_few(x, w.cached_end, hi)
+                w.cached_end = hi
+            rows = w.rows[:, lo:hi]
+            fresh = None
+        else:
+            fresh = rows = np.empty((w.rows.shape[0], hi - lo))
+            self._rows(x, lo, hi, rows)
+        # One product gives JᵀJ, Jᵀr and rᵀr: the weighted data rows, then the prior rows
+        # (x − prior)/std and the tie rows (θ_a − θ_b)/(rel·θ̄) appended as further columns.
+        m = hi - lo
+        n = len(x)
+        B = np.empty((n + 1, m + n + N_WHEELS))
+        np.multiply(rows, sw, out=B[:, :m])
+        B[:n, m:m + n] = self._prior_rows
+        np.multiply(x - self._prior, self._inv_prior_std, out=B[n, m:m + n])
+        th = x[:N_WHEELS]
+        xs = th.tolist()
+        inv_mean = 1.0 / max((xs[0] + xs[1] + xs[2] + xs[3]) / N_WHEELS, 1e-6)
+        np.multiply(self._tie_rows_t, inv_mean, out=B[:N_WHEELS, m + n:])
+        B[N_WHEELS:n, m + n:] = 0.0
+        np.multiply(self._tie_rel_d @ th, inv_mean, out=B[n, m + n:])
+        M = np.dot(B, B.T)
+        N = M[:n, :n]
+        grad = M[:n, n]
+        cost = float(M[n, n])
+        return 0.5 * cost, grad, N, (fresh, B[n, :m], x)
+
     def _fit(self, now_s: float, speed: float) -> FrictionEstimate:
         o = self.options
         slip, speeds, mu_meas, times, wheel = self._window.view()
         weights = self._weights(now_s, times)
         sw = np.sqrt(weights) * (1.0 / o.measurement_std)
-        rows_index = np.arange(len(slip))
 
-        def fun(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            return self._residuals(x, slip, speeds, mu_meas, sw, wheel, rows_index)
+        def fun(x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, tuple]:
+            return self._normal(x, sw)
 
-        result = trust_region.solve(fun, self._x, self._lb, self._ub, radius=self._radius,
-                                    max_iterations=o.max_iterations, ftol=o.ftol, xtol=o.xtol, gtol=1e-8,
-                                    max_rejections=4)
+        result = trust_region.solve_normal(fun, self._x, self._lb, self._ub, radius=self._radius,
+                                           max_iterations=o.max_iterations, ftol=o.ftol, xtol=o.xtol, gtol=1e-8,
+                                           max_rejections=4)
+        fresh, r_data, x_at = result.extra
+        window = self._window
+        if fresh is not None:
+            window.rows[:, window.start:window.end] = fresh
+        window.cached_end = window.end
+        self._cache_x = x_at
         self._x = result.x
         self._radius = max(result.radius, 1e-3)
         self._fits += 1
-        r_data = result.residuals[: len(slip)]
         self._innovation_score = self._innovation(now_s, times, r_data, weights)
-        estimate = self._report(now_s, speed, r_data, result.jacobian, weights, slip, mu_meas, speeds, wheel)
+        estimate = self._report(now_s, speed, r_data, result.normal, weights, slip, mu_meas, speeds, wheel)
         self._detect_jump(now_s, self._innovation_score)
         return estimate
 
-    def _report(self, now_s: float, speed: float, r_data: np.ndarray, J: np.ndarray, weights: np.ndarray,
+    def _report(self, now_s: float, speed: float, r_data: np.ndarray, normal: np.ndarray, weights: np.ndarray,
                 slip: np.ndarray, mu_meas: np.ndarray, speeds: np.ndarray, wheel: np.ndarray) -> FrictionEstimate:
         o = self.options
         x = self._x
@@ -399,18 +603,17 @@ class LugreTrustRegionEstimator:
         self._capped = beyond | below
         if self._capped.any():
             limit = np.where(beyond, cap, floor)
-            capped = np.empty((N_WHEELS, 4))
-            mu_cap = braking_mu_and_partials(limit, np.full(N_WHEELS, v_eval), thetas, p, capped)
+            mu_cap, _ = braking_mu_and_partials_few(limit, v_eval, thetas, p)
             wheel_mu = np.where(self._capped, np.minimum(mu_cap, wheel_mu), wheel_mu)
             wheel_lam = np.where(self._capped, limit, wheel_lam)
         # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
-        jac = np.empty((N_WHEELS, 4))
-        braking_mu_and_partials(wheel_lam, np.full(N_WHEELS, v_eval), thetas, p, jac)
-        G = np.zeros((N_WHEELS, len(x)))
-        G[np.arange(N_WHEELS), np.arange(N_WHEELS)] = jac[:, 0] * self._scale[0]
-        G[:, N_WHEELS:] = jac[:, 1:] * self._scale[N_WHEELS:]
+        _, jac = braking_mu_and_partials_few(wheel_lam, v_eval, thetas, p)
+        s0 = float(self._scale[0])
+        sc4, sc5, sc6 = self._shared_scale
+        G = np.array([[0.0] * i + [j[0] * s0] + [0.0] * (N_WHEELS - 1 - i) + [j[1] * sc4, j[2] * sc5, j[3] * sc6]
+                      for i, j in enumerate(jac.tolist())])
         # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
-        w_sum = float(np.sum(weights))
+        w_sum = float(weights.sum())
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, float(r_data @ r_data) / dof)
         if self._cov is None or self._fits % o.excitation_every == 1 or o.excitation_every <= 1:
@@ -421,25 +624,24 @@ class LugreTrustRegionEstimator:
             free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
             cov = np.zeros((len(x), len(x)))
             try:
-                Jf = J[:, free]
-                cov[np.ix_(free, free)] = np.linalg.inv(Jf.T @ Jf)
+                cov[np.ix_(free, free)] = np.linalg.inv(normal[np.ix_(free, free)])
             except np.linalg.LinAlgError:
                 cov[:] = np.inf
             self._cov_unit = cov
         cov = self._cov_unit * variance_factor
         self._cov = cov
-        g_mean = G.mean(axis=0)
-        mu_max = float(np.mean(wheel_mu))
+        g_mean = G.sum(axis=0) / N_WHEELS
+        mu_max = sum(wheel_mu.tolist()) / N_WHEELS
         mu_std = math.sqrt(max(float(g_mean @ cov @ g_mean), 0.0))
-        wheel_std = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, cov, G), 0.0))
+        wheel_std = [math.sqrt(max(v, 0.0)) if v == v else v for v in (np.dot(G, cov) * G).sum(axis=1).tolist()]
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
         if self._fits % o.excitation_every == 1 or o.excitation_every <= 1 or self._excitation_cache is None:
             self._excitation_cache = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, v_eval)
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
-        theta_mean = float(np.mean(thetas))
-        slip_star = float(np.mean(wheel_lam))
+        theta_mean = sum(thetas.tolist()) / N_WHEELS
+        slip_star = sum(wheel_lam.tolist()) / N_WHEELS
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
                   "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
                   "jumps": float(self._jumps)}
@@ -522,8 +724,8 @@ class LugreTrustRegionEstimator:
         if last is None or o.axle_balance_time_constant <= 0:
             return
         dt = min(max(now_s - last, 0.0), 0.1)
-        recent = weights > math.exp(-1.0)
-        if not (np.any(recent & (wheel < 2)) and np.any(recent & (wheel >= 2))):
+        recent_wheels = wheel[weights > math.exp(-1.0)]
+        if not (len(recent_wheels) and recent_wheels.min() < 2 <= recent_wheels.max()):
             return
         ratio = float(wheel_mu[0] + wheel_mu[1]) / max(float(wheel_mu[2] + wheel_mu[3]), 1e-6)
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
@@ -537,7 +739,7 @@ class LugreTrustRegionEstimator:
         for i in range(N_WHEELS):
             sel = slip[recent & (wheel == i)]
             if len(sel) >= 10:
-                out[i] = float(np.quantile(sel, 0.9))
+                out[i] = _quantile(sel, 0.9)
         return out
 
     def _low_slips(self, slip, wheel, weights) -> np.ndarray:
@@ -548,7 +750,7 @@ class LugreTrustRegionEstimator:
         for i in range(N_WHEELS):
             sel = slip[recent & (wheel == i)]
             if len(sel) >= 10:
-                out[i] = max(0.0, float(np.quantile(sel, 0.1)))
+                out[i] = max(0.0, _quantile(sel, 0.1))
         return out
 
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:

@@ -43,42 +43,94 @@ class TrustRegionResult:
 
 def _scaling(x: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Coleman–Li v(x) and its derivative (diagonal)."""
-    v = np.ones_like(x)
-    dv = np.zeros_like(x)
     upper = (g < 0) & np.isfinite(ub)
-    v[upper] = ub[upper] - x[upper]
-    dv[upper] = -1.0
     lower = (g > 0) & np.isfinite(lb)
-    v[lower] = x[lower] - lb[lower]
-    dv[lower] = 1.0
+    return _scaling_masked(x, upper, lower, lb, ub)
+
+
+def _scaling_masked(x, upper, lower, lb, ub) -> tuple[np.ndarray, np.ndarray]:
+    v = np.where(lower, x - lb, np.where(upper, ub - x, 1.0))
+    dv = lower.astype(float) - upper
     return v, dv
 
 
 def _subproblem(eig: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float) -> np.ndarray:
     """argmin ½ sᵀHs + gᵀs over ‖s‖ ≤ radius, from H = Q diag(w) Qᵀ and a = Qᵀg (H may be indefinite)."""
     w, Q, a = eig
-    if w[0] > 1e-12 * max(1.0, abs(w[-1])):
-        s = -(a / w)
-        if float(s @ s) <= radius * radius:
-            return Q @ s
+    wl, al = w.tolist(), a.tolist()
+    w0, w_last = wl[0], wl[-1]
+    if w0 > 1e-12 * max(1.0, abs(w_last)):
+        s = [ai / wi for ai, wi in zip(al, wl)]
+        if math.fsum(si * si for si in s) <= radius * radius:
+            return -(Q @ np.array(s))
     # Boundary solution: find λ ≥ max(0, −w_min) with ‖(H + λI)⁻¹ g‖ = radius (Newton on the
-    # secular equation 1/radius − 1/‖s(λ)‖ = 0, which is nearly linear in λ).
-    lam_low = max(0.0, -w[0]) + 1e-14 * max(1.0, abs(w[-1]))
-    norm_a = math.sqrt(float(a @ a))
-    lam = max(lam_low, norm_a / radius - w[0])
-    for _ in range(50):
-        denom = w + lam
-        s = a / denom
-        ns = math.sqrt(float(s @ s))
-        if ns == 0.0:
-            break
-        phi = 1.0 / radius - 1.0 / ns
-        if abs(phi) * radius < 1e-6:
-            break
-        dns = -float(np.sum(a * a / denom**3)) / ns
-        step = phi / (dns / (ns * ns))
-        lam = max(lam - step, lam_low)
+    # secular equation 1/radius − 1/‖s(λ)‖ = 0, which is nearly linear in λ). On n-vectors of
+    # a handful of entries: plain floats.
+    lam_low = max(0.0, -w0) + 1e-14 * max(1.0, abs(w_last))
+    norm_a = math.sqrt(sum(ai * ai for ai in al))
+    lam = max(lam_low, norm_a / radius - w0)
+    sqrt = math.sqrt
+    try:
+        for _ in range(50):
+            ss = 0.0
+            s3 = 0.0
+            for ai, wi in zip(al, wl):
+                inv = 1.0 / (wi + lam)
+                si = ai * inv
+                ss += si * si
+                s3 += si * si * inv
+            ns = sqrt(ss)
+            if ns == 0.0:
+                break
+            phi = 1.0 / radius - 1.0 / ns
+            if abs(phi) * radius < 1e-6:
+                break
+            dns = -s3 / ns
+            step = phi / (dns / (ns * ns))
+            lam = max(lam - step, lam_low)
+    except (ArithmeticError, ValueError):
+        pass
     return -(Q @ (a / (w + lam)))
+
+
+_BOXES: dict[bytes, tuple] = {}
+
+
+def _box(lb, ub) -> tuple:
+    """The bounds and what the solver derives from them, as arrays and floats (cached: a
+    recursive caller passes the same bounds every time)."""
+    lb = np.asarray(lb, dtype=float)
+    ub = np.asarray(ub, dtype=float)
+    key = lb.tobytes() + b"|" + ub.tobytes()
+    box = _BOXES.get(key)
+    if box is None:
+        lb, ub = lb.copy(), ub.copy()   # the caller may change its arrays later
+        fin_lb = np.isfinite(lb)
+        fin_ub = np.isfinite(ub)
+        span = np.where(np.isfinite(ub - lb), ub - lb, 1.0)
+        inner_lb, inner_ub = lb + 1e-10 * span, ub - 1e-10 * span
+        box = (lb, ub, fin_lb, fin_ub, inner_lb, inner_ub, lb.tolist(), ub.tolist(), fin_lb.tolist(),
+               fin_ub.tolist(), inner_lb.tolist(), inner_ub.tolist())
+        if len(_BOXES) >= 64:
+            _BOXES.clear()
+        _BOXES[key] = box
+    return box
+
+
+NormalFunction = Callable[[np.ndarray], tuple[float, np.ndarray, np.ndarray, object]]
+
+
+@dataclass(slots=True)
+class NormalResult:
+    x: np.ndarray
+    cost: float                 # ½‖r‖² at x
+    gradient: np.ndarray        # Jᵀr at x
+    normal: np.ndarray          # JᵀJ at x
+    extra: object               # what `fun` returned with the evaluation at x
+    radius: float
+    iterations: int
+    converged: bool
+    evaluations: int
 
 
 def solve(
@@ -102,53 +154,114 @@ def solve(
     `gtol`. `max_rejections` bounds the radius reductions per iteration (a recursive caller
     would rather continue on the next update than spend an unbounded time now).
     """
-    lb = np.asarray(lb, dtype=float)
-    ub = np.asarray(ub, dtype=float)
+
+    def normal(r: np.ndarray, J: np.ndarray):
+        return 0.5 * float(r @ r), J.T @ r, J.T @ J, (r, J)
+
+    def fun_normal(x: np.ndarray):
+        return normal(*fun(x))
+
+    res = solve_normal(fun_normal, x0, lb, ub, radius=radius, max_iterations=max_iterations, ftol=ftol,
+                       xtol=xtol, gtol=gtol, initial=None if initial is None else normal(*initial),
+                       max_rejections=max_rejections)
+    evaluations = res.evaluations - (1 if initial is not None else 0)
+    r, J = res.extra
+    return TrustRegionResult(res.x, res.cost, r, J, res.radius, res.iterations, res.converged, evaluations)
+
+
+def solve_normal(
+    fun: NormalFunction,
+    x0: np.ndarray,
+    lb: np.ndarray,
+    ub: np.ndarray,
+    *,
+    radius: float | None = None,
+    max_iterations: int = 50,
+    ftol: float = 1e-8,
+    xtol: float = 1e-8,
+    gtol: float = 1e-8,
+    initial: tuple[float, np.ndarray, np.ndarray, object] | None = None,
+    max_rejections: int = 60,
+) -> NormalResult:
+    """`solve` on the normal equations: `fun(x)` returns (½‖r‖², Jᵀr, JᵀJ, extra).
+
+    The same iterations as `solve` (everything it does with r and J goes through these three),
+    for a caller that can form JᵀJ and Jᵀr more cheaply than the full Jacobian; `extra` is
+    handed back with the accepted point (e.g. the residuals).
+    """
+    lb, ub, fin_lb, fin_ub, inner_lb, inner_ub, lbl, ubl, fin_lbl, fin_ubl, inner_lbl, inner_ubl = _box(lb, ub)
     # Strictly interior start: trf-style, a bound-touching start has no room to scale.
-    x = np.clip(np.asarray(x0, dtype=float), lb, ub)
-    span = np.where(np.isfinite(ub - lb), ub - lb, 1.0)
-    x = np.clip(x, lb + 1e-10 * span, ub - 1e-10 * span)
-    r, J = initial if initial is not None else fun(x)
-    evaluations = 0 if initial is not None else 1
-    cost = 0.5 * float(r @ r)
-    g = J.T @ r
+    x = np.array([min(max(min(max(v, lo), hi), ilo), ihi)
+                  for v, lo, hi, ilo, ihi in zip(np.asarray(x0, dtype=float).tolist(), lbl, ubl, inner_lbl, inner_ubl)])
+    cost, g, N, extra = initial if initial is not None else fun(x)
+    evaluations = 1
     if radius is None or not math.isfinite(radius) or radius <= 0:
-        v, _ = _scaling(x, g, lb, ub)
+        v, _ = _scaling_masked(x, (g < 0) & fin_ub, (g > 0) & fin_lb, lb, ub)
         radius = math.sqrt(float(np.sum(x * x / v))) or 1.0
     converged = False
     iterations = 0
+    # The n-vectors (a handful of entries) are handled as floats: fused loops instead of a
+    # dozen numpy calls on tiny arrays per iteration. Same operations as `_scaling` & co.
+    n = len(x)
+    sqrt = math.sqrt
+    diagonal = (np.arange(n), np.arange(n))
     while iterations < max_iterations:
-        v, dv = _scaling(x, g, lb, ub)
-        if float(np.max(np.abs(g * v))) < gtol:
+        xl, gl = x.tolist(), g.tolist()
+        d, g_h, g_dv = [0.0] * n, [0.0] * n, [0.0] * n
+        gv_max = gh_max = 0.0
+        nan = False
+        for i in range(n):
+            gi, xi = gl[i], xl[i]
+            if gi > 0 and fin_lbl[i]:
+                vi = xi - lbl[i]
+                g_dv[i] = gi
+            elif gi < 0 and fin_ubl[i]:
+                vi = ubl[i] - xi
+                g_dv[i] = -gi
+            else:
+                vi = 1.0
+            gv = abs(gi * vi)
+            nan = nan or gv != gv
+            gv_max = gv if gv > gv_max else gv_max
+            di = sqrt(vi) if vi > 0 else 0.0
+            d[i] = di
+            ghi = di * gi
+            g_h[i] = ghi
+            ghi = abs(ghi)
+            gh_max = ghi if ghi > gh_max else gh_max
+        if not nan and gv_max < gtol:
             converged = True
             break
-        d = np.sqrt(v)
-        g_h = d * g
-        J_h = J * d
-        H = J_h.T @ J_h + np.diag(g * dv)
+        d_arr = np.array(d)
+        H = N * np.multiply.outer(d_arr, d_arr)
+        H[diagonal] += g_dv
         w, Q = np.linalg.eigh(H)
-        eig = (w, Q, Q.T @ g_h)
+        eig = (w, Q, np.array(g_h) @ Q)
         iterations += 1
+        theta = max(0.995, 1.0 - gh_max)
+        upper_room = [theta * (ubl[i] - xl[i]) for i in range(n)]
+        lower_room = [theta * (lbl[i] - xl[i]) for i in range(n)]
         # Inner loop: shrink the radius until a step decreases the cost.
         for _attempt in range(max_rejections):
-            s_h = _subproblem(eig, radius)
-            s = d * s_h
+            s_h = _subproblem(eig, radius).tolist()
+            s = [d[i] * s_h[i] for i in range(n)]
             # Stay strictly inside the box: a component that would cross its bound goes a
             # fraction θ of the way there, the others keep their full length (a projected
             # step; scaling the whole step would stall the free coordinates at a bound).
-            theta = max(0.995, 1.0 - float(np.max(np.abs(g_h))))
-            upper_room = theta * (ub - x)
-            lower_room = theta * (lb - x)
-            if np.any(s > upper_room) or np.any(s < lower_room):
-                s = np.minimum(np.maximum(s, lower_room), upper_room)
-                s_h = s / d
-            predicted = -(float(g_h @ s_h) + 0.5 * float(s_h @ H @ s_h))
-            x_new = x + s
-            r_new, J_new = fun(x_new)
+            for i in range(n):
+                if s[i] > upper_room[i] or s[i] < lower_room[i]:
+                    s = [min(max(s[k], lower_room[k]), upper_room[k]) for k in range(n)]
+                    s_h = [s[k] / d[k] for k in range(n)]
+                    break
+            s_arr = np.array(s_h)
+            predicted = -(sum(g_h[i] * s_h[i] for i in range(n)) + 0.5 * float(s_arr @ H @ s_arr))
+            # Iterates stay as far inside as the start is put: the result, passed back in as the
+            # next warm start, is then used exactly as returned.
+            x_new = np.array([min(max(xl[i] + s[i], inner_lbl[i]), inner_ubl[i]) for i in range(n)])
+            cost_new, g_new, N_new, extra_new = fun(x_new)
             evaluations += 1
-            cost_new = 0.5 * float(r_new @ r_new)
             actual = cost - cost_new
-            step_norm = math.sqrt(float(s_h @ s_h))
+            step_norm = sqrt(sum(v * v for v in s_h))
             ratio = actual / predicted if predicted > 0 else -1.0
             if ratio < 0.25:
                 radius = 0.25 * step_norm if step_norm > 0 else 0.25 * radius
@@ -156,17 +269,16 @@ def solve(
                 radius *= 2.0
             if actual > 0 and math.isfinite(cost_new):
                 break
-            if radius < 1e-12 * (1.0 + math.sqrt(float(x @ x))):
-                return TrustRegionResult(x, cost, r, J, radius, iterations, True, evaluations)
+            if radius < 1e-12 * (1.0 + sqrt(sum(v * v for v in xl))):
+                return NormalResult(x, cost, g, N, extra, radius, iterations, True, evaluations)
         else:
-            return TrustRegionResult(x, cost, r, J, radius, iterations, True, evaluations)
-        x_norm = math.sqrt(float(x @ x))
-        x, r, J = x_new, r_new, J_new
-        g = J.T @ r
+            return NormalResult(x, cost, g, N, extra, radius, iterations, True, evaluations)
+        x_norm = sqrt(sum(v * v for v in xl))
+        x, g, N, extra = x_new, g_new, N_new, extra_new
         small_cost = actual < ftol * cost
-        small_step = math.sqrt(float(s @ s)) < xtol * (xtol + x_norm)
+        small_step = sqrt(sum(v * v for v in s)) < xtol * (xtol + x_norm)
         cost = cost_new
         if small_cost or small_step:
             converged = True
             break
-    return TrustRegionResult(x, cost, r, J, radius, iterations, converged, evaluations)
+    return NormalResult(x, cost, g, N, extra, radius, iterations, converged, evaluations)

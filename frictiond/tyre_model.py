@@ -187,11 +187,46 @@ def braking_mu_and_partials(lam: np.ndarray, v: np.ndarray, theta: np.ndarray, p
     return g_over_theta * F + p.sigma2 * lam_v
 
 
+def braking_mu_and_partials_few(lam, v: float, theta, p: LugreParams) -> tuple[np.ndarray, np.ndarray]:
+    """`braking_mu_and_partials` at one speed for a handful of (λ, θ) pairs, in floats.
+
+    Returns μ (k,) and the partials (k, 4); for the few points of a peak this is much cheaper
+    than the array path.
+    """
+    exp, expm1 = math.exp, math.expm1
+    mu_c, dmu, alpha, sigma0, v_s, sigma2 = p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.v_s, p.sigma2
+    k = sigma0 * p.patch_length
+    inv_v_s, inv_sigma0, c_v_s = 1.0 / v_s, 1.0 / sigma0, alpha / v_s
+    mus, rows = [], []
+    for lam_i, theta_i in zip(np.asarray(lam, dtype=float).ravel().tolist(),
+                              np.asarray(theta, dtype=float).ravel().tolist()):
+        lam_i = min(lam_i, MAX_MODEL_SLIP)
+        lam_v = lam_i * v
+        ratio = (lam_v * inv_v_s) ** alpha if lam_v >= 0 else math.nan
+        e = exp(-ratio)
+        g = mu_c + dmu * e
+        inv_theta = 1.0 / theta_i
+        Z = theta_i * k * lam_i / (g * (1.0 - lam_i))
+        if Z < _SMALL_Z:
+            F = Z / 2.0 - Z * Z / 6.0
+            dF = 0.5 - Z / 3.0
+        else:
+            one_minus = -expm1(-Z)
+            inv_Z = 1.0 / Z
+            F = 1.0 - one_minus * inv_Z
+            dF = (one_minus - Z * exp(-Z)) * inv_Z * inv_Z
+        g_over_theta = g * inv_theta
+        ZdF = Z * dF
+        rows.append((g_over_theta * inv_theta * (ZdF - F), g_over_theta * ZdF * inv_sigma0,
+                     (F - ZdF) * inv_theta * dmu * e * c_v_s * ratio, lam_v))
+        mus.append(g_over_theta * F + sigma2 * lam_v)
+    return np.array(mus), np.array(rows).reshape(-1, 4)
+
+
 # Peak search: a fixed slip grid, then a fine grid around the best point and a parabola
 # through the three best fine points. Vectorised over several θ (one per wheel).
 _PEAK_GRID = np.geomspace(2e-3, MAX_MODEL_SLIP, 48)
 _FINE = np.linspace(-1.0, 1.0, 21)
-_THREE = np.array([-1.0, 0.0, 1.0])
 
 
 def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarray, np.ndarray]:
@@ -200,24 +235,12 @@ def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarr
     `near` (previous λ* per θ) skips the coarse search when the peak is still inside a ±25 %
     bracket around it — the usual case for a recursive caller whose fit moves a little per update.
     """
-    thetas = np.atleast_1d(np.asarray(thetas, dtype=float))[:, None]
     v = float(speed_mps)
     if near is not None:
-        # Two parabolic steps through three points around the previous peak; accept when the
-        # middle point is the highest (the peak is bracketed) and the step has become small.
-        lam = np.clip(np.asarray(near, dtype=float), 2e-3, 0.9 * MAX_MODEL_SLIP)
-        for h_rel in (0.08, 0.02):
-            h = (h_rel * lam)[:, None]
-            pts = lam[:, None] + h * _THREE[None, :]
-            fv = _mu_grid(pts, v, thetas, p)
-            y0, y1, y2 = fv[:, 0], fv[:, 1], fv[:, 2]
-            denom = y0 - 2 * y1 + y2
-            if not np.all((denom < 0) & (y1 >= y0) & (y1 >= y2)):
-                break
-            lam = lam + 0.5 * (y0 - y2) / denom * h[:, 0]
-        else:
-            mu_star = _mu_grid(lam[:, None], v, thetas, p)[:, 0]
-            return mu_star, lam
+        found = _peaks_near(v, p, thetas, near)
+        if found is not None:
+            return found
+    thetas = np.atleast_1d(np.asarray(thetas, dtype=float))[:, None]
     grid = _PEAK_GRID[None, :]
     values = _mu_grid(grid, v, thetas, p)
     # The tyre's peak is the first local maximum: with a large viscous term σ2·λ·v the curve
@@ -228,14 +251,59 @@ def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarr
     hi = _PEAK_GRID[np.minimum(i + 1, len(_PEAK_GRID) - 1)]
     centre = _PEAK_GRID[i]
     half = np.maximum(centre - lo, hi - centre)[:, None]
-    fine = np.clip(centre[:, None] + half * _FINE[None, :], 1e-4, MAX_MODEL_SLIP)
+    fine = np.minimum(np.maximum(centre[:, None] + half * _FINE[None, :], 1e-4), MAX_MODEL_SLIP)
     fv = _mu_grid(fine, v, thetas, p)
     return _refine(fine, fv, np.argmax(fv, axis=1), v, thetas, p)
 
 
+def _peaks_near(v: float, p: LugreParams, thetas, near) -> tuple[np.ndarray, np.ndarray] | None:
+    """The bracketed refinement of `peaks` around `near`, in scalars (a handful of θ: cheaper
+    than arrays); None when some peak is not bracketed (then the caller searches the grid)."""
+    exp, expm1 = math.exp, math.expm1
+    mu_c, dmu, alpha, theta_k = p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0 * p.patch_length
+    v_ratio, s2v = v / p.v_s, p.sigma2 * v
+    low, high = 2e-3, 0.9 * MAX_MODEL_SLIP
+
+    def mu_at(lam: float, theta: float) -> float:
+        g = mu_c + dmu * exp(-((lam * v_ratio) ** alpha))
+        Z = (theta * theta_k) * lam / (g * (1.0 - lam))
+        if Z < _SMALL_Z:
+            Z = _SMALL_Z
+        return (g / theta) * (1.0 + expm1(-Z) / Z) + s2v * lam
+
+    if not (v_ratio > 0 and math.isfinite(v_ratio)):
+        return None
+    mus, lams = [], []
+    try:
+        pairs = list(zip(np.asarray(thetas, dtype=float).ravel().tolist(),
+                         np.asarray(near, dtype=float).ravel().tolist(), strict=True))
+    except ValueError:
+        return None
+    for theta, lam in pairs:
+        # Two parabolic steps through three points around the previous peak; accept when the
+        # middle point is the highest (the peak is bracketed) and the step has become small.
+        lam = min(max(lam, low), high)
+        for h_rel in (0.08, 0.02):
+            h = h_rel * lam
+            try:
+                y0, y1, y2 = mu_at(lam - h, theta), mu_at(lam, theta), mu_at(lam + h, theta)
+            except (ArithmeticError, ValueError):
+                return None
+            denom = y0 - 2 * y1 + y2
+            if not (denom < 0 and y1 >= y0 and y1 >= y2):
+                return None
+            lam = lam + 0.5 * (y0 - y2) / denom * h
+        try:
+            mus.append(mu_at(lam, theta))
+        except (ArithmeticError, ValueError):
+            return None
+        lams.append(lam)
+    return np.array(mus), np.array(lams)
+
+
 def _refine(fine, fv, j, v, thetas, p) -> tuple[np.ndarray, np.ndarray]:
     """Parabola through the best fine-grid point and its neighbours."""
-    j = np.clip(j, 1, fine.shape[1] - 2)
+    j = np.minimum(np.maximum(j, 1), fine.shape[1] - 2)
     rows = np.arange(len(j))
     y0, y1, y2 = fv[rows, j - 1], fv[rows, j], fv[rows, j + 1]
     x1 = fine[rows, j]
@@ -243,8 +311,8 @@ def _refine(fine, fv, j, v, thetas, p) -> tuple[np.ndarray, np.ndarray]:
     denom = y0 - 2 * y1 + y2
     with np.errstate(divide="ignore", invalid="ignore"):
         shift = np.where(denom < 0, 0.5 * (y0 - y2) / denom, 0.0)
-    shift = np.clip(shift, -1.0, 1.0)
-    lam_star = np.clip(x1 + shift * h, 1e-4, MAX_MODEL_SLIP)
+    shift = np.minimum(np.maximum(shift, -1.0), 1.0)
+    lam_star = np.minimum(np.maximum(x1 + shift * h, 1e-4), MAX_MODEL_SLIP)
     # Evaluate at the refined slip rather than trusting the parabola's height (at the edge of
     # the slip range the curve is not a parabola).
     mu_star = _mu_grid(lam_star[:, None], v, thetas, p)[:, 0]

@@ -172,9 +172,6 @@ def test_stuck_wheel_speed_in_every_scenario_position(default_config, wheel):
     assert not false_valid(estimates, truth_lookup(sim))
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: after a wet stop, the next (dry) stop emits ~9 VALID estimates "
-                   "(t≈1.31–1.40 s into the stop) with MuMax 0.61 vs truth 0.90, confidence 0.76–0.82: the old "
-                   "surface's fit is reported VALID when braking starts on a new surface")
 def test_surface_change_between_stops_gives_no_false_valid(default_config):
     """Clean input, no fault at all: a wet stop, then a dry stop (the gap does not matter)."""
     wet, _ = simulate_frames(default_config, "wet", seed=1)
@@ -188,12 +185,6 @@ def test_surface_change_between_stops_gives_no_false_valid(default_config):
     assert not bad, bad[:3]
 
 
-ONSET_BUG = ("BUG: at brake onset of the 2nd+ stop the estimator emits ~8 VALID outputs (t≈1.34–1.43 s into the "
-             "stop, confidence ~0.86) with MuMax 0.40–0.72 against a truth of 0.90, whatever the fault of the "
-             "previous stop; a fresh pipeline on the same stop does not")
-
-
-@pytest.mark.xfail(strict=True, reason=ONSET_BUG)
 def test_stops_in_a_row_each_with_a_fault(default_config):
     """Several dry stops on one pipeline, 100 s apart, clock stepping between, a fault in each."""
     pipeline = Pipeline(default_config)

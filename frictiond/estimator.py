@@ -287,6 +287,16 @@ class LugreTrustRegionEstimator:
             window.clear()
             self._mu_history.clear()
             self._last_update_s = None
+            # The times kept as anchors (last excitation, last jump) are from the old clock:
+            # left there, `now − last excitation` would stay negative, and a VALID would be
+            # held for as long as the clock went back (hours of free rolling) instead of
+            # `hold_s`. Carry them over the step, as if one bus period had passed.
+            step = t - self._last_sample_s - 0.01
+            if math.isfinite(self._last_excited_s):
+                self._last_excited_s += step
+            if math.isfinite(self._last_jump_s):
+                self._last_jump_s += step
+            self._excited_since_s = math.inf
         self._last_sample_s = t
         window.drop_before(t - o.window_s)
         fresh = len(window) == 0

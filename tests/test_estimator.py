@@ -156,3 +156,15 @@ def test_new_braking_event_needs_its_own_evidence():
             if abs(e.mu_max - truth) > 0.2 * truth:
                 wrong.append((round(t - t0, 3), round(e.mu_max, 3), round(truth, 3)))
     assert not wrong, wrong[:5]
+
+
+def test_clock_step_back_does_not_extend_the_hold_of_valid():
+    """The clock jumps back 1 h after a stop: a VALID is held `hold_s` as usual, not for an hour."""
+    est = LugreTrustRegionEstimator()
+    last, _, _ = run(est, braking(lambda t, i: lugre_curve(tm.LugreParams(theta=1.2)), seed=7, duration=2.0),
+                     lambda s: 0.0)
+    assert last.status == Status.VALID
+    statuses = [est.update(PhysicalSample(2.0 - 3600.0 + k * 0.01, 25.0, (0.0,) * 4, (0.0,) * 4, (0.0,) * 4,
+                                          (0.0,) * 4, (True,) * 4, True)).status for k in range(500)]
+    assert statuses[0] == Status.VALID
+    assert statuses[-1] == Status.NOT_EXCITED

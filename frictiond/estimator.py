@@ -282,6 +282,29 @@ class LugreTrustRegionEstimator:
         self._cov: np.ndarray | None = None
         self._cov_unit: np.ndarray | None = None
 
+    def _new_event(self) -> None:
+        """The first samples after the window ran empty: a new braking event begins.
+
+        The fitted parameters stay (a warm start and prior: the road is usually the same), but
+        all evidence derived from the previous event's samples is forgotten: the cached
+        excitation, covariance and slip support, the μ_max history behind the drift term and the
+        start of the excitation ramp. Otherwise the first fits of the new event, before its data
+        reach the peak, would be reported VALID on the old event's evidence (with the old road's
+        μ_max, on what may be a new surface). A VALID still held from the last event (`hold_s`)
+        is left to expire as usual, but it is no longer renewed by stale excitation.
+        """
+        self._excitation_cache = None
+        self.excitation_reasons = ["", "", "", ""]
+        self._cov = None
+        self._cov_unit = None
+        self._slip_support = None
+        self._capped = None
+        self._mu_history.clear()
+        self._excited_since_s = math.inf
+        self._innovation_score = 0.0
+        self._radius = None
+        self._last_update_s = None
+
     def state(self) -> dict[str, Any]:
         """JSON-serialisable: fitted parameters and the last valid estimate (a prior for a restart)."""
         params = (self._x * self._scale).tolist()
@@ -326,7 +349,19 @@ class LugreTrustRegionEstimator:
             window.clear()
             self._mu_history.clear()
             self._last_update_s = None
+            # The times kept as anchors (last excitation, last jump) are from the old clock:
+            # left there, `now − last excitation` would stay negative, and a VALID would be
+            # held for as long as the clock went back (hours of free rolling) instead of
+            # `hold_s`. Carry them over the step, as if one bus period had passed.
+            step = t - self._last_sample_s - 0.01
+            if math.isfinite(self._last_excited_s):
+                self._last_excited_s += step
+            if math.isfinite(self._last_jump_s):
+                self._last_jump_s += step
+            self._excited_since_s = math.inf
         self._last_sample_s = t
+        window.drop_before(t - o.window_s)
+        fresh = len(window) == 0
         added = 0
         v = sample.speed_mps
         for i in range(N_WHEELS):
@@ -334,7 +369,8 @@ class LugreTrustRegionEstimator:
             if sample.usable[i] and slip >= o.min_slip and math.isfinite(sample.mu_used[i]):
                 window.append(slip, v, sample.mu_used[i] * self._axle_scale(i), t, i)
                 added += 1
-        window.drop_before(t - o.window_s)
+        if added and fresh:
+            self._new_event()
         if added and len(window) >= o.min_samples:
             estimate = self._fit(t, v)
         else:

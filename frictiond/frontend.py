@@ -71,6 +71,9 @@ class FrontEndOptions:
     brake_gain_time_constant: float = 2.0   # s
     brake_gain_min_decel: float = 0.25       # m/s^2 of deceleration before the body equation is used
     brake_gain_limits: float = 0.25         # correction stays within 1 ± this
+    dead_wheel_ratio: float = 0.1           # a wheel this far below the others (share of their speed) ...
+    dead_wheel_s: float = 0.2               # ... for longer than an ABS lets a braked wheel lock is dead
+    dead_wheel_unbraked_s: float = 0.05     # ... or this long with no brake pressure that could lock it
 
 
     def validate(self) -> None:
@@ -92,6 +95,9 @@ class FrontEndResult:
     sample: PhysicalSample | None       # None while the filter warms up or after a fault
     stale_messages: tuple[str, ...] = ()
     fault: str | None = None
+    # Wheels whose speed sensor reads (near) zero while the car rolls on: excluded from the
+    # sample; the estimate goes on with the others, but must not be called VALID.
+    dead_wheels: tuple[int, ...] = ()
 
 
 class _MessageHistory:
@@ -198,6 +204,9 @@ class FrontEnd:
         self._previous_speeds: tuple[float, ...] = (math.nan,) * 4
         self._unexplained_s = 0.0
         self._last_sample_time_s: float | None = None
+        self._low_since_s: list[float | None] = [None] * 4
+        self._low_unbraked_s = [0.0] * 4
+        self._dead = [False] * 4
 
     @property
     def brake_gain_factor(self) -> float:
@@ -367,11 +376,17 @@ class FrontEnd:
         radius = veh.wheel_radius
         wheel_linear = [radius * float(w) for w in omega]
         stuck = [n >= opts.stuck_frames for n in self._repeats] if abs(accel_long_raw) > 0.5 else [False] * 4
+        braked = [p - veh.brake_pushout_pressure > opts.min_brake_pressure for p in pressures]  # type: ignore[operator]
+        dead = self._dead_wheels(t_c, wheel_linear, braked)
         if any(stuck) and not all(stuck):
             # Keep a stuck wheel out of the speed estimate and out of the fit.
             slowest_ok = min(w for w, st in zip(wheel_linear, stuck) if not st)
             wheel_linear = [slowest_ok if st else w for w, st in zip(wheel_linear, stuck)]
-        braked = [p - veh.brake_pushout_pressure > opts.min_brake_pressure for p in pressures]  # type: ignore[operator]
+        if any(dead) and not all(dead):
+            # A dead sensor's zero would drag the free-rolling speed observer (it pulls towards
+            # the wheels' mean) down by a quarter: it stands in with the slowest live wheel.
+            slowest_live = min(w for w, d in zip(wheel_linear, dead) if not d)
+            wheel_linear = [slowest_live if d else w for w, d in zip(wheel_linear, dead)]
         braking = any(braked)
         driving = self._has_drive_torque and any(abs(d) > 20.0 for d in drive)
 
@@ -430,6 +445,7 @@ class FrontEnd:
                 and load > 50.0
                 and not glitch
                 and not stuck[i]
+                and not dead[i]
                 and math.isfinite(mu)
             )
             slips.append(slip)
@@ -449,7 +465,46 @@ class FrontEnd:
             speed_from_reference=from_ref,
         )
         fault = "wheel speed glitch" if glitch else ("wheel speed stuck" if any(stuck) else None)
-        return FrontEndResult(sample, stale, fault)
+        return FrontEndResult(sample, stale, fault, tuple(i for i in range(4) if dead[i]))
+
+    def _dead_wheels(self, time_s: float, wheel_linear: list[float], braked: list[bool]) -> list[bool]:
+        """Wheels whose sensor reads (near) zero while the others say the car rolls on.
+
+        A wheel far below the others is either locked by its brake or its sensor is dead (a
+        broken wire reads 0). A lock needs brake pressure, and an ABS releases a locking wheel
+        within a fraction of a second (ice included: the pressure is dumped, the road spins the
+        wheel up again). So: far below the other wheels for longer than `dead_wheel_s`, or for
+        `dead_wheel_unbraked_s` with no pressure on that wheel, is a dead sensor. It stays dead
+        until its reading agrees with the others again (at a standstill all read zero, which
+        proves nothing either way). Without ABS a wheel locked for longer is also reported: its
+        slip is beyond `max_slip` then, so it is out of the fit anyway.
+        """
+        opts = self.options
+        out = [False] * 4
+        for i in range(4):
+            others = max(w for j, w in enumerate(wheel_linear) if j != i)
+            w = wheel_linear[i]
+            if self._dead[i]:
+                if w > 0.5 * others and w > 0.3:
+                    self._dead[i] = False
+                    self._low_since_s[i] = None
+                    self._low_unbraked_s[i] = 0.0
+                out[i] = self._dead[i]
+                continue
+            low = others >= opts.min_speed and w < opts.dead_wheel_ratio * others
+            if not low:
+                self._low_since_s[i] = None
+                self._low_unbraked_s[i] = 0.0
+                continue
+            since = self._low_since_s[i]
+            if since is None or time_s < since:
+                self._low_since_s[i] = since = time_s
+                self._low_unbraked_s[i] = 0.0
+            elif not braked[i] and self._last_sample_time_s is not None:
+                self._low_unbraked_s[i] += max(0.0, min(time_s - self._last_sample_time_s, opts.max_gap))
+            if time_s - since > opts.dead_wheel_s or self._low_unbraked_s[i] > opts.dead_wheel_unbraked_s:
+                self._dead[i] = out[i] = True
+        return out
 
     def _update_speed(
         self, time_s: float, wheel_linear: list[float], accel_long: float, wheels_loaded: bool

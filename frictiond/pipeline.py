@@ -20,6 +20,9 @@ from .samples import FrictionEstimate, PhysicalSample, Status
 # This many repaired input faults within the window turn the status to FAULT.
 FAULTS_FOR_STATUS = 15
 FAULT_WINDOW_S = 0.5
+# With a dead wheel-speed sensor the estimate goes on from the other wheels, but it has lost
+# a wheel's data and the redundancy behind the speed estimate: never VALID, confidence capped.
+DEAD_WHEEL_CONFIDENCE = 0.3
 
 
 def make_estimator(config: Config) -> Any:
@@ -164,10 +167,17 @@ class Pipeline:
             estimate = self.estimator.update(result.sample)
             while self._recent_faults and self._recent_faults[0] < time_s - FAULT_WINDOW_S:
                 self._recent_faults.popleft()
+            if result.dead_wheels:
+                self.stats.faults["wheel speed dead"] += 1
             if len(self._recent_faults) >= FAULTS_FOR_STATUS:
                 # Glitches the front end could repair, but so many that the input itself is
                 # suspect (a failing sensor, a spoofing node): say so instead of VALID.
                 estimate = replace(estimate, status=Status.FAULT, confidence=0.0)
+            elif result.dead_wheels:
+                # A wheel-speed sensor reads zero while the car rolls: that wheel is out of the
+                # fit; what the others give is reported, but not promised (not VALID).
+                estimate = replace(estimate, status=Status.CONVERGING if estimate.status == Status.VALID
+                                   else estimate.status, confidence=min(estimate.confidence, DEAD_WHEEL_CONFIDENCE))
             elif estimate.status == Status.VALID:
                 self._last_valid = estimate
         self.last_estimate = estimate

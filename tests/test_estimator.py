@@ -126,3 +126,45 @@ def test_baseline_recovers_burckhardt_peak():
     last, errors, statuses = run(est, braking(lambda t, i: curve, seed=6), lambda s: mu_true)
     assert statuses.count(Status.VALID) > 0.6 * len(statuses)
     assert np.mean(errors) < 0.05
+
+
+def test_new_braking_event_needs_its_own_evidence():
+    """A wet stop, free rolling, then braking on dry: the wet fit must not be VALID at the onset.
+
+    The learned parameters stay as the warm start, but the excitation (and the VALID it allows)
+    must come from the new event's samples. During the long free rolling the old VALID expires
+    to NOT_EXCITED (which carries the last valid value, not to be trusted).
+    """
+    wet, dry = tm.LugreParams(theta=2.2), tm.LugreParams(theta=1.0)
+    est = LugreTrustRegionEstimator()
+    run(est, braking(lambda t, i: lugre_curve(wet), seed=7, duration=2.0), lambda s: 0.0)
+    rolling = [est.update(PhysicalSample(2.0 + k * 0.01, 25.0, (0.0,) * 4, (0.0,) * 4, (0.0,) * 4, (0.0,) * 4,
+                                         (True,) * 4, True)) for k in range(500)]
+    assert rolling[-1].status == Status.NOT_EXCITED and rolling[-1].confidence == 0.0
+    lam_star = tm.peak(25.0, dry)[1]
+    t0, wrong, valid = 7.0, [], 0
+    rng = np.random.default_rng(8)
+    for k in range(60):     # brake onset: the slip ramps through the linear region to the peak
+        t = t0 + k * 0.01
+        lam = min(1.0, k / 25.0) * lam_star * (1.0 + (0.3 * math.sin(2 * math.pi * 3.0 * t) if k > 25 else 0.0))
+        mu = float(tm.mu(lam, 25.0, dry))
+        e = est.update(PhysicalSample(t, 25.0, (lam,) * 4, tuple(mu + float(rng.normal(0, 0.01)) for _ in range(4)),
+                                      (4000.0,) * 4, (0.0,) * 4, (True,) * 4, True))
+        truth = tm.peak(25.0, dry)[0]
+        if e.status == Status.VALID:
+            valid += 1
+            if abs(e.mu_max - truth) > 0.2 * truth:
+                wrong.append((round(t - t0, 3), round(e.mu_max, 3), round(truth, 3)))
+    assert not wrong, wrong[:5]
+
+
+def test_clock_step_back_does_not_extend_the_hold_of_valid():
+    """The clock jumps back 1 h after a stop: a VALID is held `hold_s` as usual, not for an hour."""
+    est = LugreTrustRegionEstimator()
+    last, _, _ = run(est, braking(lambda t, i: lugre_curve(tm.LugreParams(theta=1.2)), seed=7, duration=2.0),
+                     lambda s: 0.0)
+    assert last.status == Status.VALID
+    statuses = [est.update(PhysicalSample(2.0 - 3600.0 + k * 0.01, 25.0, (0.0,) * 4, (0.0,) * 4, (0.0,) * 4,
+                                          (0.0,) * 4, (True,) * 4, True)).status for k in range(500)]
+    assert statuses[0] == Status.VALID
+    assert statuses[-1] == Status.NOT_EXCITED

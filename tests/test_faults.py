@@ -86,10 +86,7 @@ DETECTED_ELSEWHERE = {
     "accelerometer offset -0.5": lambda p: p.front_end.accel_bias_mps2 < -0.1,
 }
 
-BUGS = {
-    "dead wheel speed (reads 0)": "BUG: frontend stuck detection needs w > 1.0 rad/s: a wheel-speed sensor dead at 0 "
-                                  "while the car rolls at 20+ m/s is never flagged (VALID, confidence ~0.8, no fault counted)",
-}
+BUGS: dict[str, str] = {}
 
 # The names of faults.standard_faults, in order (checked against it below).
 CASE_NAMES = ["stuck wheel speed", "dead wheel speed (reads 0)", "wheel speed 0xFFFF marker", "pressures lost 1 s",
@@ -185,12 +182,6 @@ def test_surface_change_between_stops_gives_no_false_valid(default_config):
     assert not bad, bad[:3]
 
 
-ONSET_BUG = ("BUG: at brake onset of the 2nd+ stop the estimator emits ~8 VALID outputs (t≈1.34–1.43 s into the "
-             "stop, confidence ~0.86) with MuMax 0.40–0.72 against a truth of 0.90, whatever the fault of the "
-             "previous stop; a fresh pipeline on the same stop does not")
-
-
-@pytest.mark.xfail(strict=True, reason=ONSET_BUG)
 def test_stops_in_a_row_each_with_a_fault(default_config):
     """Several dry stops on one pipeline, 100 s apart, clock stepping between, a fault in each."""
     pipeline = Pipeline(default_config)

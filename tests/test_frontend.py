@@ -205,3 +205,52 @@ def test_brake_gain_correction_recovers_a_wrong_pad_friction():
 def test_even_window_is_rejected():
     with pytest.raises(ValueError, match="odd"):
         make(FrontEndOptions(derivative_window=6))
+
+
+class WheelDrive(Drive):
+    """`Drive` with the FL wheel's reading (and pressure) given by functions of time."""
+
+    def __init__(self, fl_omega, fl_pressure, **kw):
+        super().__init__(**kw)
+        self.fl_omega, self.fl_pressure = fl_omega, fl_pressure
+
+
+def feed_fl(fe: FrontEnd, drive: WheelDrive, duration):
+    results = []
+    for k in range(int(duration / 0.01)):
+        t = k * 0.01
+        w = drive.omega(t)
+        fe.push(t + 0.003, "ACCEL", {"accel_long": -drive.decel, "accel_lat": 0.0, "yaw_rate": 0.0})
+        fe.push(t + 0.006, "PRESS", dict(zip(PRESSURE_NAMES, (drive.fl_pressure(t),) + (drive.pressure,) * 3)))
+        r = fe.push(t + 0.01, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, (drive.fl_omega(t, w), w, w, w))))
+        if r is not None:
+            results.append((t + 0.01, r))
+    return results
+
+
+def test_dead_wheel_sensor_is_flagged_and_excluded():
+    """A sensor reading 0 at 20+ m/s, braked or not: flagged within a fraction of a second, until it reads again."""
+    for pressure in (0.0, 80.0):
+        drive = WheelDrive(lambda t, w: 0.0 if 0.5 <= t < 1.5 else w, lambda t, p=pressure: p,
+                           v0=25.0, decel=4.0 if pressure else 0.0, slip=0.02 if pressure else 0.0)
+        results = feed_fl(make(FrontEndOptions(brake_gain_correction=False)), drive, 2.0)
+        flagged = [t for t, r in results if 0 in r.dead_wheels]
+        assert flagged and min(flagged) < 0.5 + 0.3, pressure
+        assert all(0.5 <= t < 1.5 + 0.1 for t in flagged), pressure
+        assert all(not r.sample.usable[0] for t, r in results if 0 in r.dead_wheels and r.sample)
+        # the others still give the right speed (the dead zero does not drag the observer down)
+        assert all(abs(r.sample.speed_mps - drive.speed(r.sample.time_s)) < 0.5
+                   for t, r in results if r.sample and 0.6 < t < 1.5)
+
+
+def test_wheel_locked_briefly_under_abs_is_not_a_dead_sensor():
+    """Ice: the braked wheel locks for 0.15 s at high pressure, the ABS dumps it, the road spins it up."""
+    def omega(t, w):
+        if 0.5 <= t < 0.65:
+            return 0.0
+        if 0.65 <= t < 1.0:
+            return w * (t - 0.65) / 0.35
+        return w
+    drive = WheelDrive(omega, lambda t: 5.0 if 0.62 <= t < 0.9 else 60.0, v0=20.0, decel=1.0, slip=0.03)
+    results = feed_fl(make(), drive, 2.0)
+    assert not any(r.dead_wheels for _, r in results)

@@ -25,7 +25,7 @@ from typing import Any, Callable
 
 import can
 
-from .busio import frame_to_message, message_to_frame, open_bus
+from .busio import direct_io, frame_to_message, message_to_frame, open_bus
 from .config import Config, ConfigError
 from .estimate_log import EstimateLog
 from .frames import Frame
@@ -156,6 +156,7 @@ class Daemon:
         self.pipeline = Pipeline(self.config)
         self._set_rates()
         self.bus: Any = None
+        self._direct = None          # SocketCAN: one system call per frame (busio.direct_io)
         self.bus_down = False          # a failure was logged and the bus has not recovered yet
         self.bus_off = False
         self._backoff = FIRST_BACKOFF_S
@@ -223,12 +224,14 @@ class Daemon:
         except (can.CanError, OSError, ValueError) as exc:
             self._bus_failed(exc, "open")
             return
+        self._direct = direct_io(self.bus)
         self.stats.bus_opens += 1
         if first:
             log.info("listening on %s %s for IDs %s", cfg.interface, cfg.channel,
                      ", ".join(f"0x{i:X}" for i in sorted(self.pipeline.input_codec.input_ids)))
 
     def _close_bus(self) -> None:
+        self._direct = None
         bus, self.bus = self.bus, None
         if bus is not None:
             try:
@@ -298,13 +301,17 @@ class Daemon:
             log.warning("CAN controller restarted after bus-off")
 
     def _send(self, frames: list[Frame]) -> None:
+        direct = self._direct
         for i, frame in enumerate(frames):
             bus = self.bus
             if bus is None:
                 self.stats.tx_dropped += len(frames) - i
                 return
             try:
-                bus.send(frame_to_message(frame), timeout=0)
+                if direct is not None:
+                    direct.send(frame_to_message(frame))
+                else:
+                    bus.send(frame_to_message(frame), timeout=0)
             except (can.CanError, OSError) as exc:
                 if _errno_of(exc) in LINK_ERRNOS:
                     self.stats.tx_dropped += len(frames) - i
@@ -474,7 +481,8 @@ class Daemon:
                     stop.wait(min(0.1, self._next_open - now, self.tick_interval_s))
             else:
                 try:
-                    msg = bus.recv(timeout=self.tick_interval_s)
+                    direct = self._direct
+                    msg = direct.recv(self.tick_interval_s) if direct is not None else bus.recv(timeout=self.tick_interval_s)
                 except (can.CanError, OSError, ValueError) as exc:
                     self._bus_failed(exc, "receive")
                     msg = None

@@ -129,6 +129,8 @@ insmod {m}/net/can/can-raw.ko
 insmod {m}/drivers/net/can/dev/can-dev.ko
 insmod {m}/drivers/net/can/vcan.ko
 ip link add dev vcan0 type vcan && ip link set up vcan0
+# as on a gateway with memory to spare: frictiond asks for a 1 MiB receive buffer
+echo 4194304 > /proc/sys/net/core/rmem_max
 cd {REPO}
 {sys.executable} {GUEST_SCRIPT} {out} > {out}/guest.log 2>&1
 echo $? > {out}/guest-status

@@ -221,18 +221,30 @@ def _build_can(data: Any, base: Path) -> CanConfig:
     return dataclasses.replace(section, dbc=paths)
 
 
-def _check_regular_file(key: str, path: Path) -> None:
-    """A readable-looking regular file, or a ConfigError (never an OSError, never a FIFO that blocks)."""
+def _not_a_regular_file(path: Path) -> str | None:
+    """Why `path` cannot be read as a file (None if it is a regular file): never an OSError,
+    and never a FIFO or device that would block the read."""
     try:
         mode = path.stat().st_mode
     except FileNotFoundError:
-        raise ConfigError(f"{key}: {path}: no such file") from None
+        return "no such file"
     except ValueError:   # a NUL byte in the path
-        raise ConfigError(f"{key}: {_short(path)!r}: not a usable file path") from None
+        return "not a usable file path"
     except OSError as exc:
-        raise ConfigError(f"{key}: {_short(path)}: {exc.strerror or exc}") from None
-    if not stat.S_ISREG(mode):
-        raise ConfigError(f"{key}: {_short(path)}: not a regular file")
+        return f"cannot read: {exc.strerror or exc}"
+    if stat.S_ISDIR(mode):
+        return "is a directory"
+    return None if stat.S_ISREG(mode) else "not a regular file"
+
+
+_CONFIG_FILE_WORDING = {"no such file": "no such config file", "is a directory": "is a directory, not a config file",
+                        "cannot read:": "cannot read config:"}
+
+
+def _check_regular_file(key: str, path: Path) -> None:
+    problem = _not_a_regular_file(path)
+    if problem is not None:
+        raise ConfigError(f"{key}: {_short(path)!r}: {problem}" if "usable" in problem else f"{key}: {_short(path)}: {problem}")
 
 
 def _short(path: Path) -> str:
@@ -323,20 +335,17 @@ def parse_config(data: Any, path: Path | None) -> Config:
 def load_config(path: Path | str) -> Config:
     """Read and validate a YAML config file. Raises `ConfigError` naming the problem."""
     path = Path(path)
+    problem = _not_a_regular_file(path)
+    if problem is not None:
+        name = repr(str(path)) if "usable" in problem else _short(path)
+        for generic, specific in _CONFIG_FILE_WORDING.items():
+            problem = problem.replace(generic, specific)
+        raise ConfigError(f"{name}: {problem}")
     try:
-        mode = path.stat().st_mode
-        if stat.S_ISDIR(mode):
-            raise ConfigError(f"{path}: is a directory, not a config file")
-        if not stat.S_ISREG(mode):   # a FIFO or device would block the read or never end
-            raise ConfigError(f"{path}: not a regular file")
         with open(path, "rb") as fh:
             raw = fh.read(MAX_CONFIG_BYTES + 1)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such config file") from None
-    except ValueError:   # a NUL byte in the path
-        raise ConfigError(f"{str(path)!r}: not a usable file path") from None
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from None
+        raise ConfigError(f"{_short(path)}: cannot read config: {exc.strerror or exc}") from None
     if len(raw) > MAX_CONFIG_BYTES:
         raise ConfigError(f"{path}: config larger than {MAX_CONFIG_BYTES} bytes")
     try:

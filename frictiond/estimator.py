@@ -627,8 +627,7 @@ class LugreTrustRegionEstimator:
         # `peak_extrapolation`× the slips actually seen (a monotone fit of a flat-topped road),
         # μ_max is read at that slip instead of at a "peak" near lock.
         if self._fits % o.excitation_every == 1 or self._slip_support is None:
-            self._slip_support = self._high_slips(slip, wheel, weights)
-            self._slip_floor = self._low_slips(slip, wheel, weights)
+            self._slip_floor, self._slip_support = self._slip_range(slip, wheel, weights)
         cap = self._slip_support * o.peak_extrapolation
         beyond = wheel_lam > cap
         # The other side: data that only ever sit far past the fitted peak (a road whose μ keeps
@@ -767,27 +766,19 @@ class LugreTrustRegionEstimator:
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
         self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
 
-    def _high_slips(self, slip, wheel, weights) -> np.ndarray:
-        """The high end (90 %) of each wheel's recent slips (∞ for a wheel without data)."""
+    def _slip_range(self, slip, wheel, weights) -> tuple[np.ndarray, np.ndarray]:
+        """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
+        without data gets (0, ∞): no bound on either side."""
         o = self.options
         recent = weights > math.exp(-o.excitation_window_s / o.forgetting_time_constant)
-        out = np.full(N_WHEELS, np.inf)
+        low = np.zeros(N_WHEELS)
+        high = np.full(N_WHEELS, np.inf)
         for i in range(N_WHEELS):
             sel = slip[recent & (wheel == i)]
             if len(sel) >= 10:
-                out[i] = _quantile(sel, 0.9)
-        return out
-
-    def _low_slips(self, slip, wheel, weights) -> np.ndarray:
-        """The low end (10 %) of each wheel's recent slips (0 for a wheel without data)."""
-        o = self.options
-        recent = weights > math.exp(-o.excitation_window_s / o.forgetting_time_constant)
-        out = np.zeros(N_WHEELS)
-        for i in range(N_WHEELS):
-            sel = slip[recent & (wheel == i)]
-            if len(sel) >= 10:
-                out[i] = max(0.0, _quantile(sel, 0.1))
-        return out
+                low[i] = max(0.0, _quantile(sel, 0.1))
+                high[i] = _quantile(sel, 0.9)
+        return low, high
 
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""

@@ -378,15 +378,13 @@ class FrontEnd:
         stuck = [n >= opts.stuck_frames for n in self._repeats] if abs(accel_long_raw) > 0.5 else [False] * 4
         braked = [p - veh.brake_pushout_pressure > opts.min_brake_pressure for p in pressures]  # type: ignore[operator]
         dead = self._dead_wheels(t_c, wheel_linear, braked)
-        if any(stuck) and not all(stuck):
-            # Keep a stuck wheel out of the speed estimate and out of the fit.
-            slowest_ok = min(w for w, st in zip(wheel_linear, stuck) if not st)
-            wheel_linear = [slowest_ok if st else w for w, st in zip(wheel_linear, stuck)]
-        if any(dead) and not all(dead):
-            # A dead sensor's zero would drag the free-rolling speed observer (it pulls towards
-            # the wheels' mean) down by a quarter: it stands in with the slowest live wheel.
-            slowest_live = min(w for w, d in zip(wheel_linear, dead) if not d)
-            wheel_linear = [slowest_live if d else w for w, d in zip(wheel_linear, dead)]
+        failed = [st or d for st, d in zip(stuck, dead)]
+        if any(failed) and not all(failed):
+            # Keep a stuck or dead sensor out of the speed estimate (a dead one's zero would drag
+            # the free-rolling observer, which pulls towards the wheels' mean, down by a quarter):
+            # the slowest working wheel stands in for it.
+            slowest_ok = min(w for w, f in zip(wheel_linear, failed) if not f)
+            wheel_linear = [slowest_ok if f else w for w, f in zip(wheel_linear, failed)]
         braking = any(braked)
         driving = self._has_drive_torque and any(abs(d) > 20.0 for d in drive)
 

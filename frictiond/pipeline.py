@@ -43,13 +43,17 @@ def make_estimator(config: Config) -> Any:
 class PipelineStats:
     frames_read: int = 0
     input_frames: int = 0
-    ignored_frames: int = 0
+    ignored: Counter = field(default_factory=Counter)   # frames that are not inputs, by kind
     error_frames: int = 0
     undecodable: Counter = field(default_factory=Counter)
     updates: int = 0
     frames_out: int = 0
     status_updates: Counter = field(default_factory=Counter)
     faults: Counter = field(default_factory=Counter)
+
+    @property
+    def ignored_frames(self) -> int:
+        return sum(self.ignored.values())
 
     @property
     def undecodable_total(self) -> int:
@@ -92,21 +96,22 @@ class Pipeline:
             if frame.is_error:
                 stats.error_frames += 1
             else:
-                stats.ignored_frames += 1
+                stats.ignored["remote frames" if frame.is_remote else
+                              "extended IDs" if frame.is_extended else "unrelated IDs"] += 1
             return []
         if frame.is_error:
             stats.error_frames += 1
             return []
         if frame.is_remote:
-            stats.ignored_frames += 1
+            stats.ignored["remote frames"] += 1
             return []
         try:
             decoded = self.input_codec.decode(frame)
         except DecodeFailure as exc:
             stats.undecodable[str(exc.reason if hasattr(exc, "reason") else exc)] += 1
             return []
-        if decoded is None:
-            stats.ignored_frames += 1
+        if decoded is None:   # an extended frame that shares a standard input's ID
+            stats.ignored["extended IDs" if frame.is_extended else "unrelated IDs"] += 1
             return []
         stats.input_frames += 1
         result = self.front_end.push(decoded.time_s, decoded.message, decoded.values)

@@ -38,7 +38,6 @@ class ReplaySummary:
     final: FrictionEstimate | None
     trigger_period_s: float
     counter_jumps: int = 0            # alive-counter jumps on input messages (lost/repeated frames)
-    skipped: dict[str, int] = field(default_factory=dict)   # ignored frames by kind
     repeated_triggers: int = 0        # wheel-speed frames the front end skipped (repeats, reordering)
 
     def status_seconds(self) -> dict[str, float]:
@@ -53,7 +52,7 @@ class ReplaySummary:
             f"frames read       {s.frames_read}  ({span:.2f} s of log)",
             f"input frames      {s.input_frames}",
             f"ignored frames    {s.ignored_frames}  (not inputs"
-            + "".join(f"; {k}: {v}" for k, v in self.skipped.items() if v) + ")",
+            + "".join(f"; {k}: {v}" for k, v in s.ignored.items() if v) + ")",
             f"error frames      {s.error_frames}",
             f"undecodable       {s.undecodable_total}"
             + ("" if not s.undecodable else "  (" + "; ".join(f"{k}: {v}" for k, v in s.undecodable.most_common(5)) + ")"),
@@ -89,17 +88,10 @@ def replay_frames(
 ) -> ReplaySummary:
     first = last = None
     process = pipeline.process
-    remote = extended = 0
-    input_ids = pipeline.input_codec.input_ids
     for frame in frames:
         if first is None:
             first = frame.time_s
         last = frame.time_s
-        if not frame.is_error:  # kinds of frame the pipeline ignores, for the summary
-            if frame.is_remote:
-                remote += 1
-            elif frame.is_extended and frame.can_id not in input_ids:
-                extended += 1
         out = process(frame)
         if out:
             if sink is not None:
@@ -107,15 +99,9 @@ def replay_frames(
                     sink.write(f)
             if recorder is not None:
                 recorder.record(pipeline.last_estimate, pipeline.last_sample)
-    stats = pipeline.stats
-    skipped = {
-        "unrelated IDs": stats.ignored_frames - remote - extended,
-        "extended IDs": extended,
-        "remote frames": remote,
-    }
     return ReplaySummary(
-        stats, first, last, pipeline.last_estimate, pipeline.front_end.period_of(pipeline.trigger_message),
-        pipeline.input_codec.counter_jumps, skipped, getattr(pipeline.front_end, "skipped_triggers", 0),
+        pipeline.stats, first, last, pipeline.last_estimate, pipeline.front_end.period_of(pipeline.trigger_message),
+        pipeline.input_codec.counter_jumps, pipeline.front_end.skipped_triggers,
     )
 
 

@@ -227,27 +227,27 @@ class SocketcanDirect:
         sock.setblocking(False)
 
     def recv(self, timeout: float) -> can.Message | None:
-        sock = self._sock
-        try:
-            msg = self._capture(sock)
-        except can.CanOperationError as exc:
-            if exc.error_code not in (errno.EAGAIN, errno.EWOULDBLOCK):
-                raise
+        msg = self._read()
+        if msg is None:
             try:
-                ready = select.select([sock], [], [], timeout)[0]
+                ready = select.select([self._sock], [], [], timeout)[0]
             except OSError as error:
                 raise can.CanOperationError(f"Failed to receive: {error.strerror}", error.errno) from error
             if not ready:
                 return None
-            try:
-                msg = self._capture(sock)
-            except can.CanOperationError as exc2:
-                if exc2.error_code in (errno.EAGAIN, errno.EWOULDBLOCK):
-                    return None
-                raise
+            msg = self._read()
         if msg is not None and not msg.channel:
             msg.channel = self._channel
         return msg
+
+    def _read(self) -> can.Message | None:
+        """One queued frame, or None when nothing is queued."""
+        try:
+            return self._capture(self._sock)
+        except can.CanOperationError as exc:
+            if exc.error_code in (errno.EAGAIN, errno.EWOULDBLOCK):
+                return None
+            raise
 
     def send(self, msg: can.Message) -> None:
         try:

@@ -64,10 +64,10 @@ def main(argv=None) -> int:
                             method="trf", **TOL)
         scipy_full.append(time.perf_counter() - t0)
         v = max(sample.speed_mps, 1.0)
-        mu_a = peaks(v, est._params(mine.x), mine.x[:4])[0]
-        mu_b = peaks(v, est._params(ref.x), ref.x[:4])[0]
+        mu_a = peaks(v, est._params(mine.x), est._thetas(mine.x))[0]
+        mu_b = peaks(v, est._params(ref.x), est._thetas(ref.x))[0]
         mu_diff.append(float(np.max(np.abs(mu_a - mu_b))))
-        mu_u = peaks(v, est._params(est._x), est._x[:4])[0]   # the bounded update's own fit
+        mu_u = peaks(v, est._params(est._x), est._thetas(est._x))[0]   # the bounded update's own fit
         upd_diff.append(float(np.max(np.abs(mu_u - mu_b))))
     braking_updates = [t for t in update_times if t > 20e-6]
     print(f"samples {len(samples)}, fits compared {fits}")

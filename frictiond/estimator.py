@@ -2,7 +2,7 @@
 
 Design (the choices model.md leaves open, and why):
 
-- Identified: one road parameter θ per wheel (split-μ must show per wheel), and, pooled over the
+- Identified: one road parameter θ per wheel (split-μ must show per wheel), fitted as ln θ, and, pooled over the
   wheels, the bristle stiffness σ0 (slip stiffness σ0·L/2), the Stribeck speed v_s (how the peak
   moves with sliding speed) and the viscous σ2 (the shape beyond the peak). Fitting static LuGre
   to Burckhardt and Magic Formula curves on every surface, these four reproduce the peak within
@@ -10,7 +10,10 @@ Design (the choices model.md leaves open, and why):
   held at their published values: with θ free they are not separately identifiable (θ and the
   g-scale multiply), and with σ0 free L is redundant.
 - Priors: every free parameter is regularised toward a prior (nominal values, or the state
-  saved from the last run), so unexcited directions stay put instead of wandering. The θ of the
+  saved from the last run), so unexcited directions stay put instead of wandering. θ scales
+  μ as 1/θ and spans 1 (dry asphalt) to ~30 (ice): its prior is on ln θ, a relative
+  uncertainty, or an absolute one strong enough to hold θ on dry roads would keep it far
+  from ice (fits stalled at twice ice's μ_max). The θ of the
   front and rear wheel on one side are tied by a soft constraint (they roll on the same track);
   left and right only weakly (split-μ).
 - Window: samples older than `window_s` are dropped, the rest weighted by exp(−age/τ). A change
@@ -57,12 +60,12 @@ class LugreTROptions:
     prior_sigma0: float = 181.54
     prior_v_s: float = 6.57
     prior_sigma2: float = 0.0018
-    prior_std_theta: float = 3.0
+    prior_std_log_theta: float = 4.0      # prior std of ln θ (θ is fitted as ln θ)
     prior_std_sigma0: float = 60.0
     prior_std_v_s: float = 3.0
     prior_std_sigma2: float = 0.003
-    front_rear_coupling: float = 0.08     # relative std of θ_front − θ_rear on one side
-    left_right_coupling: float = 0.6      # relative std of θ_left − θ_right (split-μ allowed)
+    front_rear_coupling: float = 0.08     # std of ln θ_front − ln θ_rear on one side (relative)
+    left_right_coupling: float = 0.6      # std of ln θ_left − ln θ_right (split-μ allowed)
     # Bounds of the free parameters.
     theta_min: float = 0.35
     theta_max: float = 40.0
@@ -93,7 +96,7 @@ class LugreTROptions:
     confidence_tolerance: float = 0.06    # relative μ_max uncertainty at which confidence = e^(−½)
     model_mismatch: float = 0.03          # relative floor of the uncertainty (the road is not LuGre)
     drift_window_s: float = 0.15
-    settle_s: float = 0.05                # confidence ramps up over the first excited instants
+    settle_s: float = 0.08                # confidence ramps up over the first excited instants
     hold_s: float = 2.0                   # VALID is kept this long after braking ends
     excitation_hold_s: float = 0.15       # ... and this long while braking without excitation
     jump_threshold: float = 2.5           # change detector: newest mean residual in noise std units
@@ -117,8 +120,9 @@ class LugreTROptions:
             prior = getattr(self, f"prior_{name}")
             if not low <= prior <= high or low >= high:
                 raise ValueError(f"prior_{name}: {prior} must lie within [{name}_min, {name}_max] = [{low}, {high}]")
-            if getattr(self, f"prior_std_{name}") <= 0:
-                raise ValueError(f"prior_std_{name}: must be > 0")
+            std_name = "prior_std_log_theta" if name == "theta" else f"prior_std_{name}"
+            if getattr(self, std_name) <= 0:
+                raise ValueError(f"{std_name}: must be > 0")
         if self.theta_min <= 0:
             raise ValueError("theta_min: must be > 0")
 
@@ -212,41 +216,32 @@ class LugreTrustRegionEstimator:
         self.options.validate()
         self.vehicle = vehicle or VehicleParams()
         o = self.options
+        # x: ln θ per wheel, then σ0, v_s, σ2 divided by their nominal values.
         self._scale = np.array([1.0] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, max(o.prior_sigma2, 1e-3)])
-        self._lb = np.array([o.theta_min] * N_WHEELS + [o.sigma0_min, o.v_s_min, o.sigma2_min]) / self._scale
-        self._ub = np.array([o.theta_max] * N_WHEELS + [o.sigma0_max, o.v_s_max, o.sigma2_max]) / self._scale
-        self._prior_std = np.array([o.prior_std_theta] * N_WHEELS + [o.prior_std_sigma0, o.prior_std_v_s,
-                                                                     o.prior_std_sigma2]) / self._scale
+        self._lb = np.array([math.log(o.theta_min)] * N_WHEELS + [o.sigma0_min, o.v_s_min, o.sigma2_min]) / self._scale
+        self._ub = np.array([math.log(o.theta_max)] * N_WHEELS + [o.sigma0_max, o.v_s_max, o.sigma2_max]) / self._scale
+        self._prior_std = np.array([o.prior_std_log_theta] * N_WHEELS + [o.prior_std_sigma0, o.prior_std_v_s,
+                                                                         o.prior_std_sigma2]) / self._scale
         self._base = LugreParams(mu_c=o.mu_c, mu_s=o.mu_s, alpha=o.alpha, patch_length=o.patch_length)
         self._saved_prior: np.ndarray | None = None
         self._J_prior = np.diag(1.0 / self._prior_std)
-        # Soft ties between wheels' θ: front–rear on each side, left–right on each axle.
+        # Soft ties between wheels' ln θ: front–rear on each side, left–right on each axle.
         self._tie_a = np.array([0, 1, 0, 2])
         self._tie_b = np.array([2, 3, 1, 3])
         self._tie_rel = np.array([o.front_rear_coupling, o.front_rear_coupling,
                                   o.left_right_coupling, o.left_right_coupling])
         self._tie_rows = np.arange(len(self._tie_a))
         if self._scale[0] != 1.0:
-            raise AssertionError("θ is fitted unscaled")
+            raise AssertionError("ln θ is fitted unscaled")
         self._work: np.ndarray | None = None
-        # The priors and ties in normal-equation form (see `_normal`): the prior rows
-        # (x − prior)/std give diag(1/std²); the tie rows (θ_a − θ_b)/(rel·θ̄) give C/θ̄².
-        n = len(self._scale)
-        self._prior_info = 1.0 / self._prior_std**2
-        ties = np.zeros((N_WHEELS, N_WHEELS))
-        for a, b, rel in zip(self._tie_a, self._tie_b, self._tie_rel):
-            d = np.zeros(N_WHEELS)
-            d[a], d[b] = 1.0, -1.0
-            ties += np.outer(d, d) / (rel * rel)
-        self._tie_info = ties
+        # The priors and ties as rows appended to the data (see `_normal`): (x − prior)/std and
+        # (ln θ_a − ln θ_b)/rel, both linear in x.
         self._inv_prior_std = 1.0 / self._prior_std
         self._prior_rows = np.diag(self._inv_prior_std)
         self._tie_rel_d = np.zeros((len(self._tie_a), N_WHEELS))   # rows (e_a − e_b)/rel
         for k, (a, b, rel) in enumerate(zip(self._tie_a, self._tie_b, self._tie_rel)):
             self._tie_rel_d[k, a], self._tie_rel_d[k, b] = 1.0 / rel, -1.0 / rel
         self._tie_rows_t = self._tie_rel_d.T.copy()
-        self._N_prior = np.diag(self._prior_info)
-        self._diag_index = np.arange(n)
         self._alpha = float(o.alpha)
         self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
         self._prior_peak: tuple[float, tuple] | None = None
@@ -255,7 +250,7 @@ class LugreTrustRegionEstimator:
     # ------------------------------------------------------------------------------ state
     def reset(self) -> None:
         o = self.options
-        nominal = np.array([o.prior_theta] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, o.prior_sigma2]) / self._scale
+        nominal = np.array([math.log(o.prior_theta)] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, o.prior_sigma2]) / self._scale
         self._prior = self._saved_prior.copy() if self._saved_prior is not None else nominal
         self._x = self._prior.copy()
         self._radius: float | None = None
@@ -307,7 +302,7 @@ class LugreTrustRegionEstimator:
 
     def state(self) -> dict[str, Any]:
         """JSON-serialisable: fitted parameters and the last valid estimate (a prior for a restart)."""
-        params = (self._x * self._scale).tolist()
+        params = self._thetas(self._x).tolist() + (self._x[N_WHEELS:] * self._scale[N_WHEELS:]).tolist()
         last = self._last_valid
         return {
             "kind": self.kind,
@@ -331,7 +326,9 @@ class LugreTrustRegionEstimator:
             v = params[n]
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"state parameter {n} is not a finite number")
-            values.append(float(v))
+            if n.startswith("theta_") and v <= 0:
+                raise ValueError(f"state parameter {n} must be > 0")
+            values.append(math.log(v) if n.startswith("theta_") else float(v))
         x = np.clip(np.array(values) / self._scale, self._lb, self._ub)
         self._saved_prior = x
         self.reset()
@@ -385,7 +382,7 @@ class LugreTrustRegionEstimator:
         """
         p = self._params(x)
         scale = self._scale
-        theta = (x[:N_WHEELS] * scale[:N_WHEELS])[wheel]
+        theta = self._thetas(x)[wheel]
         m = len(slip)
         n = len(x)
         n_ties = len(self._tie_a)
@@ -396,17 +393,18 @@ class LugreTrustRegionEstimator:
         r = np.empty(m + n + n_ties)
         J = np.zeros((m + n + n_ties, n))
         r[:m] = sw * (model - mu_meas)
-        J[rows_index if rows_index is not None else np.arange(m), wheel] = partials[:, 0] * sw
+        J[rows_index if rows_index is not None else np.arange(m), wheel] = partials[:, 0] * theta * sw  # ∂/∂ln θ
         J[:m, N_WHEELS:] = partials[:, 1:] * sw[:, None] * scale[N_WHEELS:]
         r[m:m + n] = (x - self._prior) / self._prior_std
         J[m:m + n] = self._J_prior
-        th = x[:N_WHEELS]
-        tie_scale = self._tie_rel * max(float(th.mean()), 1e-6)
-        r[m + n:] = (th[self._tie_a] - th[self._tie_b]) / tie_scale
-        inv = 1.0 / tie_scale
-        J[self._tie_rows + (m + n), self._tie_a] = inv
-        J[self._tie_rows + (m + n), self._tie_b] = -inv
+        r[m + n:] = self._tie_rel_d @ x[:N_WHEELS]
+        J[m + n:, :N_WHEELS] = self._tie_rel_d
         return r, J
+
+    @staticmethod
+    def _thetas(x: np.ndarray) -> np.ndarray:
+        """Each wheel's θ from the fitted ln θ."""
+        return np.exp(x[:N_WHEELS])
 
     def _params(self, x: np.ndarray) -> LugreParams:
         sigma0, v_s, sigma2 = x[N_WHEELS:] * self._scale[N_WHEELS:]
@@ -464,7 +462,7 @@ class LugreTrustRegionEstimator:
         b = self._base
         sc4, sc5, sc6 = self._shared_scale
         sigma0, v_s, sigma2 = float(x[4]) * sc4, float(x[5]) * sc5, float(x[6]) * sc6
-        thetas = x[:N_WHEELS]
+        thetas = np.exp(x[:N_WHEELS])
         wheel = w.wheel[lo:hi]
         alpha = self._alpha
         dmu = b.mu_s - b.mu_c
@@ -482,6 +480,7 @@ class LugreTrustRegionEstimator:
             lam = np.minimum(w.slip[lo:hi], MAX_MODEL_SLIP)
             speed = np.divide(lv, lam, out=np.array(w.speed[lo:hi]), where=lam > 0)
             model = braking_mu_and_partials(lam, speed, thetas[wheel], self._params(x), partials)
+            partials[:, 0] *= thetas[wheel]     # ∂/∂ln θ
             np.multiply(w.onehot[:, lo:hi], partials[:, 0], out=out[:N_WHEELS])
             out[4] = partials[:, 1] * sc4
             out[5] = partials[:, 2] * sc5
@@ -497,8 +496,7 @@ class LugreTrustRegionEstimator:
         ZdF *= iz                       # Z·F'(Z)
         FmZ = F - ZdF
         gt = g * inv_t
-        a0 = gt * inv_t
-        a0 *= FmZ
+        a0 = gt * FmZ                   # −∂μ/∂ln θ = (g/θ)(F − Z·F')
         np.multiply(w.onehot[:, lo:hi], a0, out=out[:N_WHEELS])
         out[:N_WHEELS] *= -1.0
         np.multiply(gt, ZdF, out=out[4])
@@ -519,6 +517,7 @@ class LugreTrustRegionEstimator:
         b = self._base
         sc4, sc5, sc6 = self._shared_scale
         xs = x.tolist()
+        thetas = [math.exp(u) for u in xs[:N_WHEELS]]
         sigma0, v_s, sigma2 = xs[4] * sc4, xs[5] * sc5, xs[6] * sc6
         alpha = self._alpha
         dmu, mu_c = b.mu_s - b.mu_c, b.mu_c
@@ -529,7 +528,7 @@ class LugreTrustRegionEstimator:
         cols = []
         for j in range(lo, hi):
             wi = int(w.wheel[j])
-            th = xs[wi]
+            th = thetas[wi]
             ratio = float(w.pow_lam_v[j]) * v_pow
             e = exp(-ratio)
             g = e * dmu + mu_c
@@ -547,7 +546,7 @@ class LugreTrustRegionEstimator:
             lv = float(w.lam_v[j])
             col = [0.0] * N_WHEELS + [gt * ZdF * k4, FmZ * inv_t * e * ratio * k5, lv * sc6,
                                       gt * F + sigma2 * lv - float(w.mu[j])]
-            col[wi] = -(gt * inv_t * FmZ)
+            col[wi] = -(gt * FmZ)
             cols.append(col)
         if cols:
             w.rows[:, lo:hi] = np.array(cols).T
@@ -576,12 +575,9 @@ class LugreTrustRegionEstimator:
         np.multiply(rows, sw, out=B[:, :m])
         B[:n, m:m + n] = self._prior_rows
         np.multiply(x - self._prior, self._inv_prior_std, out=B[n, m:m + n])
-        th = x[:N_WHEELS]
-        xs = th.tolist()
-        inv_mean = 1.0 / max((xs[0] + xs[1] + xs[2] + xs[3]) / N_WHEELS, 1e-6)
-        np.multiply(self._tie_rows_t, inv_mean, out=B[:N_WHEELS, m + n:])
+        B[:N_WHEELS, m + n:] = self._tie_rows_t
         B[N_WHEELS:n, m + n:] = 0.0
-        np.multiply(self._tie_rel_d @ th, inv_mean, out=B[n, m + n:])
+        np.dot(self._tie_rel_d, x[:N_WHEELS], out=B[n, m + n:])
         M = np.dot(B, B.T)
         N = M[:n, :n]
         grad = M[:n, n]
@@ -619,7 +615,7 @@ class LugreTrustRegionEstimator:
         o = self.options
         x = self._x
         p = self._params(x)
-        thetas = x[:N_WHEELS] * self._scale[:N_WHEELS]
+        thetas = self._thetas(x)
         v_eval = max(speed, 1.0)
         wheel_mu, wheel_lam = peaks(v_eval, p, thetas, near=self._last_peak_slips)
         self._last_peak_slips = wheel_lam
@@ -643,10 +639,9 @@ class LugreTrustRegionEstimator:
             wheel_lam = np.where(self._capped, limit, wheel_lam)
         # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
         _, jac = braking_mu_and_partials_few(wheel_lam, v_eval, thetas, p)
-        s0 = float(self._scale[0])
         sc4, sc5, sc6 = self._shared_scale
-        G = np.array([[0.0] * i + [j[0] * s0] + [0.0] * (N_WHEELS - 1 - i) + [j[1] * sc4, j[2] * sc5, j[3] * sc6]
-                      for i, j in enumerate(jac.tolist())])
+        G = np.array([[0.0] * i + [j[0] * th] + [0.0] * (N_WHEELS - 1 - i) + [j[1] * sc4, j[2] * sc5, j[3] * sc6]
+                      for i, (j, th) in enumerate(zip(jac.tolist(), thetas.tolist()))])
         # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
         w_sum = float(weights.sum())
         dof = max(w_sum - len(x), 1.0)
@@ -783,7 +778,7 @@ class LugreTrustRegionEstimator:
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""
         lam_hi = np.where(np.isfinite(self._slip_support), self._slip_support, 1e-3)
-        thetas = self._x[:N_WHEELS] * self._scale[:N_WHEELS]
+        thetas = self._thetas(self._x)
         return braking_mu_and_partials(lam_hi, np.full(N_WHEELS, max(speed, 1.0)), thetas,
                                        self._params(self._x), np.empty((N_WHEELS, 4)))
 
@@ -885,7 +880,7 @@ class LugreTrustRegionEstimator:
         # Never excited: report the prior (contract: NOT_EXCITED carries the prior or the last
         # valid value), not a fit that has only seen the linear part of the curve.
         p = self._params(self._prior)
-        thetas = self._prior[:N_WHEELS] * self._scale[:N_WHEELS]
+        thetas = self._thetas(self._prior)
         wm, wl = peaks(max(speed, 1.0), p, thetas)
         mu_max, slip_star, theta, wheel_mu = float(np.mean(wm)), float(np.mean(wl)), float(np.mean(thetas)), tuple(map(float, wm))
         return FrictionEstimate(now_s, Status.NOT_EXCITED, mu_max, slip_star, theta, 0.0, wheel_mu, math.inf)
@@ -894,7 +889,7 @@ class LugreTrustRegionEstimator:
     def mu_curve(self, slip: np.ndarray, speed_mps: float, wheel: int | None = None) -> np.ndarray:
         """The fitted μ(λ) at a speed (for plots): one wheel's θ, or the wheels' mean."""
         p = self._params(self._x)
-        thetas = self._x[:N_WHEELS] * self._scale[:N_WHEELS]
+        thetas = self._thetas(self._x)
         theta = float(np.mean(thetas)) if wheel is None else float(thetas[wheel])
         slip = np.asarray(slip, dtype=float)
         value, _ = mu_and_jacobian_theta(slip, np.full_like(slip, speed_mps), np.full_like(slip, theta), p, ("theta",))

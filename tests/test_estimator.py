@@ -55,6 +55,20 @@ def test_recovers_peak_of_its_own_model(theta):
     assert last.mu_max == pytest.approx(mu_true, rel=0.05)
 
 
+def test_recovers_an_ice_peak_far_from_the_prior():
+    # θ ≈ 25 (μ_max ≈ 0.05) is twenty times the nominal θ: a prior that held θ in absolute
+    # terms stalled such fits at about twice the true μ_max.
+    p = tm.LugreParams(theta=25.0, sigma0=400.0, v_s=5.0, sigma2=0.0001)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    last, errors, statuses = run(est, braking(lambda t, i: curve, seed=3, noise=0.003, v0=15.0),
+                                 lambda s: tm.peak(s.speed_mps, p)[0])
+    mu_true = tm.peak(5.0, p)[0]
+    assert statuses.count(Status.VALID) > 0.5 * len(statuses)
+    assert np.mean(errors) < 0.1 * mu_true
+    assert last.mu_max == pytest.approx(mu_true, rel=0.1)
+
+
 def test_low_slip_braking_never_claims_a_wrong_peak():
     # Moderate braking at a fifth of the peak slip: at speed the curve is still near-linear there
     # and nothing may be VALID; at walking pace LuGre's flat top is already at ~90 % of μ_max,
@@ -168,3 +182,28 @@ def test_clock_step_back_does_not_extend_the_hold_of_valid():
                                           (0.0,) * 4, (True,) * 4, True)).status for k in range(500)]
     assert statuses[0] == Status.VALID
     assert statuses[-1] == Status.NOT_EXCITED
+
+
+def test_window_jacobian_matches_finite_differences():
+    # The fit's analytic rows (∂μ/∂ln θ per wheel, ∂μ/∂σ0, v_s, σ2 scaled) and the normal
+    # equations built from them, against central differences of the residuals.
+    p = tm.LugreParams(theta=2.0, sigma0=230.0, v_s=5.0, sigma2=0.002)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    for s in braking(lambda t, i: curve, seed=4, duration=0.6):
+        est.update(s)
+    slip, speeds, mu, times, wheel = est._window.view()
+    sw = np.sqrt(est._weights(float(times[-1]), times)) / est.options.measurement_std
+    x = est._x + np.array([0.1, -0.2, 0.3, 0.05, 0.1, -0.1, 0.2])
+    r, J = est._residuals(x, slip, speeds, mu, sw, wheel)
+    cost, grad, normal, _ = est._normal(x, sw)
+    assert cost == pytest.approx(0.5 * float(r @ r), rel=1e-10)
+    np.testing.assert_allclose(grad, J.T @ r, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(normal, J.T @ J, rtol=1e-8, atol=1e-8)
+    h = 1e-6
+    for i in range(len(x)):
+        d = np.zeros_like(x)
+        d[i] = h
+        numeric = (est._residuals(x + d, slip, speeds, mu, sw, wheel)[0]
+                   - est._residuals(x - d, slip, speeds, mu, sw, wheel)[0]) / (2 * h)
+        np.testing.assert_allclose(J[:, i], numeric, rtol=1e-5, atol=1e-6 * np.abs(J).max())

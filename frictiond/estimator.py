@@ -28,6 +28,7 @@ Design (the choices model.md leaves open, and why):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass, fields
@@ -368,8 +369,14 @@ class LugreTrustRegionEstimator:
                 added += 1
         if added and fresh:
             self._new_event()
+        last = self._last_estimate
         if added and len(window) >= o.min_samples:
             estimate = self._fit(t, v)
+        elif len(window) >= o.min_samples and last is not None and last.status == Status.CONVERGING:
+            # No usable sample this cycle (wheels deep in slip, a lost frame) while the window
+            # still holds this stop's data: the untrusted fit stands. Falling back to the prior
+            # here made MuMax flicker between the fit and the nominal dry-road peak.
+            estimate = dataclasses.replace(last, time_s=t)
         else:
             estimate = self._hold(t, v)
         self._last_estimate = estimate

@@ -1,6 +1,7 @@
 """Estimators on synthetic samples with known parameters (no CAN, no front end)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -207,3 +208,24 @@ def test_window_jacobian_matches_finite_differences():
         numeric = (est._residuals(x + d, slip, speeds, mu, sw, wheel)[0]
                    - est._residuals(x - d, slip, speeds, mu, sw, wheel)[0]) / (2 * h)
         np.testing.assert_allclose(J[:, i], numeric, rtol=1e-5, atol=1e-6 * np.abs(J).max())
+
+
+def test_a_cycle_without_usable_wheels_keeps_the_running_fit():
+    # Wheels deep in slip (or a lost frame) give no usable sample for a few cycles: the
+    # untrusted fit stands until its window runs empty, instead of the nominal prior's peak.
+    p = tm.LugreParams(theta=6.0)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    samples = list(braking(lambda t, i: curve, slip_scale=0.2, seed=5, duration=1.6))
+    for s in samples[:50]:
+        fitted = est.update(s)
+    assert fitted.status == Status.CONVERGING
+    held = []
+    for s in samples[50:]:
+        blind = dataclasses.replace(s, usable=(False,) * 4)
+        held.append(est.update(blind))
+    kept = [e for e in held if e.status == Status.CONVERGING]
+    assert all(e.mu_max == fitted.mu_max for e in kept)
+    assert held[:len(kept)] == kept and kept[-1].time_s - fitted.time_s >= 0.3
+    # Once the window has run dry, the prior again.
+    assert all(e.status == Status.NOT_EXCITED for e in held[len(kept):]) and len(kept) < len(held)

@@ -68,8 +68,8 @@ class LugreTROptions:
     front_rear_coupling: float = 0.08     # std of ln θ_front − ln θ_rear on one side (relative)
     left_right_coupling: float = 0.6      # std of ln θ_left − ln θ_right (split-μ allowed)
     # Bounds of the free parameters.
-    theta_min: float = 0.35
-    theta_max: float = 40.0
+    theta_min: float = 0.35               # μ_max up to ~4
+    theta_max: float = 300.0              # μ_max down to ~0.005 (polished ice at speed is ~0.02)
     sigma0_min: float = 20.0
     sigma0_max: float = 2000.0
     v_s_min: float = 0.3
@@ -807,7 +807,13 @@ class LugreTrustRegionEstimator:
         best = 0.0
         why = self.excitation_reasons = ["", "", "", ""]
         fit_at_hi = self._fit_at_high_slip(speed)
+        # A θ held at its bound is not where the data put it: its peak proves nothing.
+        at_bound = ((self._x[:N_WHEELS] - self._lb[:N_WHEELS] < 1e-6)
+                    | (self._ub[:N_WHEELS] - self._x[:N_WHEELS] < 1e-6)).tolist()
         for i in range(N_WHEELS):
+            if at_bound[i]:
+                why[i] = "θ at its bound"
+                continue
             sel = recent & (wheel == i)
             n = int(np.count_nonzero(sel))
             if n < 10:

@@ -56,13 +56,15 @@ def test_recovers_peak_of_its_own_model(theta):
     assert last.mu_max == pytest.approx(mu_true, rel=0.05)
 
 
-def test_recovers_an_ice_peak_far_from_the_prior():
+@pytest.mark.parametrize("theta", [25.0, 60.0])
+def test_recovers_an_ice_peak_far_from_the_prior(theta):
     # θ ≈ 25 (μ_max ≈ 0.05) is twenty times the nominal θ: a prior that held θ in absolute
-    # terms stalled such fits at about twice the true μ_max.
-    p = tm.LugreParams(theta=25.0, sigma0=400.0, v_s=5.0, sigma2=0.0001)
+    # terms stalled such fits at about twice the true μ_max. θ = 60 (μ_max ≈ 0.02, polished ice)
+    # lies beyond where θ's bound once was (40): the fit sat on the bound, 20 % high, VALID.
+    p = tm.LugreParams(theta=theta, sigma0=400.0, v_s=5.0, sigma2=0.0001)
     curve = lugre_curve(p)
     est = LugreTrustRegionEstimator()
-    last, errors, statuses = run(est, braking(lambda t, i: curve, seed=3, noise=0.003, v0=15.0),
+    last, errors, statuses = run(est, braking(lambda t, i: curve, seed=3, noise=0.05 / theta, v0=15.0),
                                  lambda s: tm.peak(s.speed_mps, p)[0])
     mu_true = tm.peak(5.0, p)[0]
     assert statuses.count(Status.VALID) > 0.5 * len(statuses)

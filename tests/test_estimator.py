@@ -130,9 +130,11 @@ def test_state_round_trip_is_used_as_prior():
 
 def test_options_are_validated():
     with pytest.raises(ValueError):
-        LugreTrustRegionEstimator(LugreTROptions(prior_theta=100.0))
+        LugreTrustRegionEstimator(LugreTROptions(prior_theta=500.0))
     with pytest.raises(ValueError):
         LugreTrustRegionEstimator(LugreTROptions(max_iterations=0))
+    with pytest.raises(ValueError, match="prior_std_log_theta"):
+        LugreTrustRegionEstimator(LugreTROptions(prior_std_log_theta=0.0))
 
 
 def test_baseline_recovers_burckhardt_peak():

@@ -60,13 +60,13 @@ def braking_rows(truth: Truth, settle_s: float = 0.3) -> np.ndarray:
 # ------------------------------------------------------------------ API and scenario set
 def test_public_api_and_scenarios():
     assert set(TRUTH_MODELS) == {"burckhardt", "magic-formula", "lugre"}
-    for name in ("dry", "wet", "snow", "ice", "cobblestone_wet", "dry_to_wet", "split_mu", "moderate",
-                 "cornering", "noisy"):
+    for name in ("dry", "wet", "snow", "ice", "ice_fast", "cobblestone_wet", "dry_to_wet", "split_mu",
+                 "moderate", "cornering", "loaded", "noisy"):
         scn = SCENARIOS[name]
         assert scn.name == name
         assert scn.description and "\n" not in scn.description
         assert scn.truth_model in TRUTH_MODELS
-        assert 20.0 <= scn.initial_speed_mps <= 30.0
+        assert 12.0 <= scn.initial_speed_mps <= 40.0
         assert scn.duration_s <= 8.0
         assert scn.brake_start_s >= 1.0
     # the defaults mix the truth families
@@ -136,14 +136,15 @@ def test_speed_falls_while_braking_and_forces_are_consistent(name):
     assert v[-1] < v[0] - 2.5
     # the body equation holds for the recorded tyre forces: M dv/dt = -ΣFx - Bv v - Da v²
     fx_sum = wheels(tr, "fx").sum(axis=1)
-    accel = -(fx_sum + VEH.rolling_resistance * v + VEH.drag_area_coefficient * v * v) / VEH.mass
+    mass = VEH.mass * SCENARIOS[name].load_factor      # the car as loaded, not as configured
+    accel = -(fx_sum + VEH.rolling_resistance * v + VEH.drag_area_coefficient * v * v) / mass
     assert np.allclose(tr["accel_long"], accel, rtol=1e-9, atol=1e-9)
     # and integrating it reproduces the speed (10 ms rows of a 1 kHz integration)
     v_int = v[0] + np.concatenate([[0.0], np.cumsum(accel[:-1] * np.diff(tr.time_s))])
     assert np.max(np.abs(v_int - v)) < 0.02 * v[0]
     # loads: the four normal forces carry the car's weight
     fn = wheels(tr, "fn")
-    weight = VEH.mass * GRAVITY_MPS2
+    weight = mass * GRAVITY_MPS2
     rough = SCENARIOS[name].road_roughness
     assert np.allclose(fn.sum(axis=1), weight, rtol=4 * rough + 1e-9)
     # braking: the front axle is loaded (pitch lag aside), left/right only differ in a turn
@@ -357,3 +358,13 @@ def test_runtime():
     t0 = time.perf_counter()
     simulate("ice", VEH, SCHEDULES, seed=3)  # the longest run: 8 s of braking
     assert time.perf_counter() - t0 < 5.0  # ~0.4 s on a laptop; loose for loaded CI machines
+
+
+def test_load_factor_makes_the_true_car_heavier_than_the_configured_one():
+    config_mass = VehicleParams().mass
+    light = simulate("wet", VehicleParams(), SCHEDULES, seed=0).truth.rows()
+    heavy = simulate("loaded", VehicleParams(), SCHEDULES, seed=0).truth.rows()
+    def static_load(rows):
+        return sum(rows[5][f"fn_{w}"] for w in ("fl", "fr", "rl", "rr"))   # before braking
+    assert static_load(light) == pytest.approx(config_mass * GRAVITY_MPS2, rel=0.02)
+    assert static_load(heavy) == pytest.approx(1.25 * config_mass * GRAVITY_MPS2, rel=0.02)

@@ -1,6 +1,7 @@
 """`simulate()`: one scenario → sensor events (for any message layout) and the truth."""
 from __future__ import annotations
 
+import dataclasses
 from typing import Sequence
 
 import numpy as np
@@ -46,7 +47,9 @@ def simulate(
     ref = scn.reference_speed if reference_speed is None else bool(reference_speed)
 
     seq_dyn, seq_sensor, seq_bus = np.random.SeedSequence(seed).spawn(3)
-    trace = run_dynamics(scn, veh, family, np.random.default_rng(seq_dyn))
+    # The car as it is (loaded), against the configured one the estimator is given.
+    true_vehicle = dataclasses.replace(veh, mass=veh.mass * scn.load_factor) if scn.load_factor != 1.0 else veh
+    trace = run_dynamics(scn, true_vehicle, family, np.random.default_rng(seq_dyn))
     sensors = SensorModel(trace, np.random.default_rng(seq_sensor), scn.noise_scale)
     events = generate_events(
         schedules, sensors, np.random.default_rng(seq_bus), float(trace.t[-1]),

@@ -48,6 +48,7 @@ class Scenario:
     noise_scale: float = 1.0               # multiplies every sensor noise
     drop_rate: float = 0.005               # probability that a frame is lost
     reference_speed: bool = False          # whether a ground-speed sensor is fitted
+    load_factor: float = 1.0               # true mass / configured mass (passengers, luggage)
 
     def __post_init__(self) -> None:
         if self.truth_model not in FAMILIES:
@@ -57,6 +58,8 @@ class Scenario:
                 raise ValueError(f"scenario {self.name}: unknown surface {s!r}")
         if (self.surfaces_after is None) != (self.surface_change_s is None):
             raise ValueError(f"scenario {self.name}: surfaces_after and surface_change_s go together")
+        if not 0.5 <= self.load_factor <= 2.0:
+            raise ValueError(f"scenario {self.name}: load_factor must lie within [0.5, 2]")
         if self.brake_start_s < 1.0:
             raise ValueError(f"scenario {self.name}: at least 1 s of free rolling before braking")
 
@@ -87,6 +90,11 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario("cornering", "ABS stop in a 115 m radius left turn from 20 m/s (~3.5 m/s^2 lateral) on dry (Magic Formula truth)",
                  _all("dry"), "magic-formula", initial_speed_mps=20.0, curve_radius_m=115.0,
                  brake_gain_factor=(1.04, 0.97)),
+        Scenario("ice_fast", "ABS braking on ice from 35 m/s, 8 s: μ_max ~0.026 (Burckhardt truth)",
+                 _all("ice"), "burckhardt", initial_speed_mps=35.0, brake_gain_factor=(1.03, 0.95)),
+        Scenario("loaded", "ABS stop on wet asphalt from 25 m/s in a car 25 % heavier than configured (Magic Formula truth)",
+                 _all("wet"), "magic-formula", initial_speed_mps=25.0, load_factor=1.25,
+                 brake_gain_factor=(1.05, 0.97)),
         Scenario("noisy", "ABS stop on wet asphalt from 25 m/s with heavy sensor noise and 3 % lost frames (LuGre truth)",
                  _all("wet"), "lugre", initial_speed_mps=25.0, noise_scale=4.0, drop_rate=0.03),
     )

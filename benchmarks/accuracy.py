@@ -33,6 +33,7 @@ CASES = [
     ("snow/burckhardt", "snow", "burckhardt", None),
     ("ice", "ice", None, None),                       # Burckhardt truth
     ("ice/mf", "ice", "magic-formula", None),
+    ("ice_fast", "ice_fast", None, None),             # μ_max ~0.026 at 35 m/s
     ("cobblestone_wet", "cobblestone_wet", None, None),
     ("dry_to_wet", "dry_to_wet", None, None),         # μ jump mid-stop
     ("dry_to_wet/mf", "dry_to_wet", "magic-formula", None),
@@ -41,6 +42,7 @@ CASES = [
     ("noisy/ref", "noisy", None, True),
     ("moderate", "moderate", None, None),             # never near the peak: must not claim VALID
     ("cornering", "cornering", None, None),
+    ("loaded", "loaded", None, None),                 # 25 % heavier than the config says
 ]
 
 

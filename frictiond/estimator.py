@@ -264,6 +264,7 @@ class LugreTrustRegionEstimator:
         self._jumps = 0
         self._axle_balance = 0.0
         self._last_sample_s = -math.inf
+        self._load_share = [1.0 / N_WHEELS] * N_WHEELS
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
         self.excitation_reasons = ["", "", "", ""]
@@ -362,6 +363,10 @@ class LugreTrustRegionEstimator:
         fresh = len(window) == 0
         added = 0
         v = sample.speed_mps
+        loads = sample.normal_force_n
+        total_load = sum(loads)
+        if total_load > 0 and all(f >= 0 for f in loads):   # (NaN fails both)
+            self._load_share = [f / total_load for f in loads]
         for i in range(N_WHEELS):
             slip = sample.slip[i]
             if sample.usable[i] and slip >= o.min_slip and math.isfinite(sample.mu_used[i]):
@@ -667,8 +672,12 @@ class LugreTrustRegionEstimator:
             self._cov_unit = cov
         cov = self._cov_unit * variance_factor
         self._cov = cov
-        g_mean = G.sum(axis=0) / N_WHEELS
-        mu_max = sum(wheel_mu.tolist()) / N_WHEELS
+        # The road's μ_max: the wheels' peaks weighted by their normal loads. The body equation
+        # pins the total braking force (Σ μ_i·F_z,i), not its front/rear split (pad friction
+        # differs per axle), so the load-weighted mean is right when the plain mean is not.
+        share = self._load_share
+        g_mean = np.dot(share, G)
+        mu_max = sum(s * m for s, m in zip(share, wheel_mu.tolist()))
         mu_std = math.sqrt(max(float(g_mean @ cov @ g_mean), 0.0))
         wheel_std = [math.sqrt(max(v, 0.0)) if v == v else v for v in (np.dot(G, cov) * G).sum(axis=1).tolist()]
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
@@ -678,7 +687,7 @@ class LugreTrustRegionEstimator:
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(thetas.tolist()) / N_WHEELS
-        slip_star = sum(wheel_lam.tolist()) / N_WHEELS
+        slip_star = sum(s * lam for s, lam in zip(share, wheel_lam.tolist()))
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
                   "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
                   "jumps": float(self._jumps)}

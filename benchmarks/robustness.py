@@ -1,0 +1,77 @@
+"""The LuGre estimator on cases the accuracy benchmark does not have: every surface under every
+truth family at 12 and 35 m/s, a car 25 % heavier than configured, pad gains off by −15/+15 %.
+
+Tuning is done on `accuracy.py`'s set; this sweep is the check that it holds elsewhere. Prints
+per case the truth, MAE, VALID share, convergence and false VALID, and marks the cases that miss
+issue 3's targets (MAE ≤ 12 %, VALID ≥ 80 %, converged within 0.3 s).
+
+    python benchmarks/robustness.py [--seeds 1] [--jobs 2]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+from frictiond.config import default_config_path, load_config
+from frictiond.evaluation import evaluate
+from frictiond.pipeline import Pipeline
+from frictiond.replay import ReplayRecorder, replay_frames
+from frictiond.sim_frames import events_to_frames, input_codec_for, schedules_for
+from frictiond.simulator.run import simulate
+from frictiond.simulator.scenarios import Scenario
+
+
+def cases() -> list[tuple[str, Scenario]]:
+    out = []
+    for surface, family, v0 in itertools.product(("dry", "wet", "snow", "ice"), ("burckhardt", "magic-formula", "lugre"),
+                                                 (12.0, 35.0)):
+        out.append((f"{surface}/{family}/{v0:.0f} m/s",
+                    Scenario(surface, "sweep", (surface,) * 4, family, initial_speed_mps=v0)))
+    for surface in ("dry", "wet", "snow"):
+        out.append((f"{surface}/loaded +25 %", Scenario(surface, "sweep", (surface,) * 4, "magic-formula",
+                                                        load_factor=1.25)))
+        out.append((f"{surface}/pads 0.85|1.15", Scenario(surface, "sweep", (surface,) * 4, "burckhardt",
+                                                          brake_gain_factor=(0.85, 1.15))))
+    return out
+
+
+def run(job: tuple[str, Scenario, int]):
+    label, scenario, seed = job
+    config = load_config(default_config_path())
+    codec = input_codec_for(config)
+    result = simulate(scenario, config.vehicle, schedules_for(codec), seed=seed)
+    recorder = ReplayRecorder()
+    replay_frames(Pipeline(config), events_to_frames(codec, result.events), None, recorder)
+    return label, seed, evaluate(recorder.estimates, result.truth.rows())
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    args = parser.parse_args(argv)
+    t0 = time.perf_counter()
+    jobs = [(label, scn, seed) for label, scn in cases() for seed in range(args.seeds)]
+    with ProcessPoolExecutor(max(1, args.jobs)) as pool:
+        results = list(pool.map(run, jobs))
+    print(f"{'case':26s} {'truth':>6s} {'MAE':>6s} {'MAE%':>5s} {'valid%':>6s} {'conv s':>6s} {'false VALID':>11s}")
+    false_valid = valid = missed = 0
+    for label, seed, r in results:
+        false_valid += r.false_valid_count
+        valid += r.valid_count
+        miss = not (r.mae_rel <= 0.12 and r.valid_share >= 0.8 and r.convergence_s <= 0.3)
+        missed += miss
+        print(f"{label + (f' #{seed}' if args.seeds > 1 else ''):26s} {r.mean_truth:6.3f} {r.mae:6.3f} "
+              f"{100 * r.mae_rel:5.1f} {100 * r.valid_share:6.1f} {r.convergence_s:6.2f} "
+              f"{r.false_valid_count:5d}/{r.valid_count:<5d}{'  <- misses a target' if miss else ''}")
+    print(f"\nfalse VALID {false_valid}/{valid} = {100 * false_valid / max(valid, 1):.2f} %; "
+          f"{missed} of {len(results)} runs miss a target ({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -55,6 +55,7 @@ class LugreTROptions:
     max_iterations: int = 2               # trust-region iterations per update (bounded work)
     ftol: float = 1e-4                    # per-update stopping tolerances (the next update continues)
     xtol: float = 1e-4
+    predicted_ftol: float = 1e-3          # ... or when the next step promises less than this share of the cost
     measurement_std: float = 0.04         # assumed std of a utilised-μ sample (sets the prior's weight)
     # Priors (nominal values; Canudas-de-Wit et al. 2003 except θ) and their standard deviations.
     prior_theta: float = 1.2
@@ -607,7 +608,7 @@ class LugreTrustRegionEstimator:
 
         result = trust_region.solve_normal(fun, self._x, self._lb, self._ub, radius=self._radius,
                                            max_iterations=o.max_iterations, ftol=o.ftol, xtol=o.xtol, gtol=1e-8,
-                                           max_rejections=4)
+                                           max_rejections=4, predicted_ftol=o.predicted_ftol)
         fresh, r_data, x_at = result.extra
         window = self._window
         if fresh is not None:

@@ -182,12 +182,17 @@ def solve_normal(
     gtol: float = 1e-8,
     initial: tuple[float, np.ndarray, np.ndarray, object] | None = None,
     max_rejections: int = 60,
+    predicted_ftol: float = 0.0,
 ) -> NormalResult:
     """`solve` on the normal equations: `fun(x)` returns (½‖r‖², Jᵀr, JᵀJ, extra).
 
     The same iterations as `solve` (everything it does with r and J goes through these three),
     for a caller that can form JᵀJ and Jᵀr more cheaply than the full Jacobian; `extra` is
     handed back with the accepted point (e.g. the residuals).
+
+    `predicted_ftol` > 0 also stops before evaluating a step whose predicted reduction is below
+    `predicted_ftol`·cost (the quadratic model says the point is as good as converged): for a
+    recursive caller, whose next update continues anyway, it saves an evaluation per update.
     """
     lb, ub, fin_lb, fin_ub, inner_lb, inner_ub, lbl, ubl, fin_lbl, fin_ubl, inner_lbl, inner_ubl = _box(lb, ub)
     # Strictly interior start: trf-style, a bound-touching start has no room to scale.
@@ -255,6 +260,8 @@ def solve_normal(
                     break
             s_arr = np.array(s_h)
             predicted = -(sum(g_h[i] * s_h[i] for i in range(n)) + 0.5 * float(s_arr @ H @ s_arr))
+            if predicted_ftol > 0 and predicted < predicted_ftol * cost:
+                return NormalResult(x, cost, g, N, extra, radius, iterations, True, evaluations)
             # Iterates stay as far inside as the start is put: the result, passed back in as the
             # next warm start, is then used exactly as returned.
             x_new = np.array([min(max(xl[i] + s[i], inner_lbl[i]), inner_ubl[i]) for i in range(n)])

@@ -44,7 +44,7 @@ LIMITS = {
     # A car 25 % heavier than configured: the body equation's brake-gain check absorbs it.
     "loaded": (0.025, 0.035, 0.95, 0.3, None),
     # Rough road: noisier wheel speeds and μ samples; VALID over nearly all the stop.
-    "cobblestone_wet": (0.025, 0.05, 0.9, 0.3, None),
+    "cobblestone_wet": (0.025, 0.05, 0.87, 0.3, None),
     "dry_to_wet": (0.02, 0.03, 0.85, 0.3, 0.5),
     "dry_to_wet/mf": (0.05, 0.065, 0.9, 0.3, None),
     "split_mu": (0.01, 0.025, 0.95, 0.3, None),

@@ -6,7 +6,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from frictiond import tyre_model as tm
-from frictiond.trust_region import solve
+from frictiond.trust_region import solve, solve_normal
 
 
 def rosenbrock(x):
@@ -56,3 +56,17 @@ def test_iteration_bound_and_warm_radius_are_honoured():
     assert res.iterations == 2 and not res.converged
     again = solve(rosenbrock, res.x, np.array([-5.0, -5.0]), np.array([5.0, 5.0]), radius=res.radius, max_iterations=2)
     assert again.cost < res.cost
+
+
+def test_predicted_ftol_skips_evaluating_a_step_that_promises_almost_nothing():
+    def normal(x):
+        r, J = rosenbrock(x)
+        return 0.5 * float(r @ r), J.T @ r, J.T @ J, None
+
+    near = np.array([0.999, 0.998])
+    plain = solve_normal(normal, near, np.full(2, -np.inf), np.full(2, np.inf), max_iterations=5)
+    early = solve_normal(normal, near, np.full(2, -np.inf), np.full(2, np.inf), max_iterations=5,
+                         predicted_ftol=2.0)   # a Gauss–Newton step never promises more than the cost
+    assert plain.evaluations > 1 and plain.cost < 1e-12
+    assert early.evaluations == 1 and early.converged
+    np.testing.assert_array_equal(early.x, near)

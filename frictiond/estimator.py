@@ -795,9 +795,8 @@ class LugreTrustRegionEstimator:
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""
         lam_hi = np.where(np.isfinite(self._slip_support), self._slip_support, 1e-3)
-        thetas = self._thetas(self._x)
-        return braking_mu_and_partials(lam_hi, np.full(N_WHEELS, max(speed, 1.0)), thetas,
-                                       self._params(self._x), np.empty((N_WHEELS, 4)))
+        mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
+        return mu
 
     def _excitation(self, slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, speed: float = 10.0) -> float:
         """0 unless some wheel's recent data show the peak; rises to 1 as they reach it.

@@ -280,8 +280,11 @@ def _peaks_near(v: float, p: LugreParams, thetas, near) -> tuple[np.ndarray, np.
     except ValueError:
         return None
     for theta, lam in pairs:
-        # Two parabolic steps through three points around the previous peak; accept when the
-        # middle point is the highest (the peak is bracketed) and the step has become small.
+        # Parabolic steps through three points around the previous peak; each must find the
+        # middle point highest (the peak bracketed). A recursive fit moves its peak a little per
+        # update: when the first step lands within a quarter of its bracket, the parabola's
+        # error (third order in the bracket) is far below what μ_max can resolve on that flat top
+        # and the second, finer step is skipped.
         lam = min(max(lam, low), high)
         for h_rel in (0.08, 0.02):
             h = h_rel * lam
@@ -292,7 +295,10 @@ def _peaks_near(v: float, p: LugreParams, thetas, near) -> tuple[np.ndarray, np.
             denom = y0 - 2 * y1 + y2
             if not (denom < 0 and y1 >= y0 and y1 >= y2):
                 return None
-            lam = lam + 0.5 * (y0 - y2) / denom * h
+            shift = 0.5 * (y0 - y2) / denom
+            lam = lam + shift * h
+            if abs(shift) <= 0.25:
+                break
         try:
             mus.append(mu_at(lam, theta))
         except (ArithmeticError, ValueError):

@@ -78,3 +78,16 @@ def test_peak_gradient_is_envelope_derivative():
         hi = tm.peak(18.0, p.with_values(**{name: getattr(p, name) + h}))[0]
         lo = tm.peak(18.0, p.with_values(**{name: getattr(p, name) - h}))[0]
         assert grad[k] == pytest.approx((hi - lo) / (2 * h), rel=1e-3, abs=1e-9)
+
+
+@pytest.mark.parametrize("theta", [1.0, 3.0, 25.0])
+@pytest.mark.parametrize("offset", [0.97, 1.0, 1.06])
+def test_peak_refined_near_a_previous_one_matches_the_full_search(theta, offset):
+    # The recursive estimator's path: a bracketed parabolic refinement around the last λ*.
+    p = tm.LugreParams(sigma0=300.0, v_s=5.0, sigma2=0.001)
+    thetas = np.array([theta, 1.3 * theta])
+    mu_full, lam_full = tm.peaks(15.0, p, thetas)
+    assert tm._peaks_near(15.0, p, thetas, lam_full * offset) is not None   # no fallback to the grid
+    mu_near, lam_near = tm.peaks(15.0, p, thetas, near=lam_full * offset)
+    np.testing.assert_allclose(lam_near, lam_full, rtol=0.01)
+    np.testing.assert_allclose(mu_near, mu_full, rtol=1e-5)

@@ -246,7 +246,7 @@ class LugreTrustRegionEstimator:
         self._tie_rows_t = self._tie_rel_d.T.copy()
         self._alpha = float(o.alpha)
         self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
-        self._prior_peak: tuple[float, tuple] | None = None
+        self._prior_peak: tuple[tuple, tuple] | None = None   # (speed, prior) → peak of the prior
         self.reset()
 
     # ------------------------------------------------------------------------------ state
@@ -901,10 +901,16 @@ class LugreTrustRegionEstimator:
                                     last.wheel_mu_max, math.inf)
         # Never excited: report the prior (contract: NOT_EXCITED carries the prior or the last
         # valid value), not a fit that has only seen the linear part of the curve.
-        p = self._params(self._prior)
-        thetas = self._thetas(self._prior)
-        wm, wl = peaks(max(speed, 1.0), p, thetas)
-        mu_max, slip_star, theta, wheel_mu = float(np.mean(wm)), float(np.mean(wl)), float(np.mean(thetas)), tuple(map(float, wm))
+        # The prior's peak at the speed rounded to 0.1 m/s, cached: this path runs every cycle of
+        # every drive that has not braked hard yet, and the peak search is a grid search.
+        key = (round(max(speed, 1.0), 1), self._prior.tobytes())
+        if self._prior_peak is None or self._prior_peak[0] != key:
+            p = self._params(self._prior)
+            thetas = self._thetas(self._prior)
+            wm, wl = peaks(key[0], p, thetas)
+            self._prior_peak = (key, (float(np.mean(wm)), float(np.mean(wl)), float(np.mean(thetas)),
+                                      tuple(map(float, wm))))
+        mu_max, slip_star, theta, wheel_mu = self._prior_peak[1]
         return FrictionEstimate(now_s, Status.NOT_EXCITED, mu_max, slip_star, theta, 0.0, wheel_mu, math.inf)
 
     # ------------------------------------------------------------------------------ tools

@@ -606,7 +606,10 @@ class FrontEnd:
         # Each sample's own ratio is clipped to the limits first: one wild sample (spoofed wheel
         # speeds give inertia torques of kN·m) moves the sums no more than a plausible one.
         lim = opts.brake_gain_limits
-        ratio = min(max((total_force * veh.wheel_radius - other) / total_brake, 1.0 - lim), 1.0 + lim)
+        ratio = (total_force * veh.wheel_radius - other) / total_brake
+        if not math.isfinite(ratio):
+            return      # a NaN here would stay in the sums for good
+        ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
         keep = 1.0 - min(1.0, opts.default_period / max(opts.brake_gain_time_constant, 1e-3))
         self._gain_sum_tt = keep * self._gain_sum_tt + total_brake * total_brake
         self._gain_sum_tn = keep * self._gain_sum_tn + total_brake * total_brake * ratio

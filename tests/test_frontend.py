@@ -202,6 +202,24 @@ def test_brake_gain_correction_recovers_a_wrong_pad_friction():
     assert fe.brake_gain_factor == pytest.approx(true_factor, rel=0.03)
 
 
+def test_brake_gain_is_learnt_within_a_stop_and_survives_a_non_finite_sample():
+    # A car 20 % heavier than configured needs 1/1.2 of the nominal torque per unit of
+    # deceleration (for the configured mass): learnt within half a second of braking, not τ = 2 s.
+    drive = Drive(decel=7.0, slip=0.05)
+    fe = make()
+    speeds = drive.speed(0.5)
+    drag = VEH.drag_area_coefficient * speeds**2
+    inertia = 4 * VEH.wheel_inertia * drive.omega_dot() / VEH.wheel_radius
+    brake_force_true = 1.2 * VEH.mass * drive.decel - drag - inertia
+    nominal_per_bar = (2 * VEH.brake_gain_front + 2 * VEH.brake_gain_rear) / VEH.wheel_radius
+    drive.pressure = brake_force_true / nominal_per_bar
+    feed(fe, drive, duration=0.5)
+    assert fe.brake_gain_factor == pytest.approx(1 / 1.2, rel=0.04)
+    learnt = fe.brake_gain_factor
+    fe._update_brake_gain(-drive.decel, 20.0, [0.0] * 4, [500.0, 500.0, 200.0, float("nan")], [0.0] * 4)
+    assert fe.brake_gain_factor == learnt
+
+
 def test_even_window_is_rejected():
     with pytest.raises(ValueError, match="odd"):
         make(FrontEndOptions(derivative_window=6))

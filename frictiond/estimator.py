@@ -635,7 +635,11 @@ class LugreTrustRegionEstimator:
         # Do not extrapolate far beyond the data: when the fitted curve keeps rising past
         # `peak_extrapolation`× the slips actually seen (a monotone fit of a flat-topped road),
         # μ_max is read at that slip instead of at a "peak" near lock.
-        if self._fits % o.excitation_every == 1 or self._slip_support is None:
+        # The three slow-moving refreshes (slip range, covariance, excitation) fall on different
+        # fits of each `excitation_every`: together on one fit they made every third update the
+        # slowest (the p99 of the update and of the daemon's latency).
+        phase = self._fits % o.excitation_every if o.excitation_every > 1 else 1
+        if phase == 0 or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(slip, wheel, weights)
         cap = self._slip_support * o.peak_extrapolation
         beyond = wheel_lam > cap
@@ -659,7 +663,7 @@ class LugreTrustRegionEstimator:
         w_sum = float(weights.sum())
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, float(r_data @ r_data) / dof)
-        if self._cov is None or self._fits % o.excitation_every == 1 or o.excitation_every <= 1:
+        if self._cov is None or phase == 2 or o.excitation_every <= 2:
             # Parameters held at a bound are fixed there for the covariance: the unconstrained
             # Gauss–Newton covariance would count spread into the infeasible side. Like the
             # excitation, it changes slowly: refreshed every few fits.
@@ -683,7 +687,7 @@ class LugreTrustRegionEstimator:
         wheel_std = [math.sqrt(max(v, 0.0)) if v == v else v for v in (np.dot(G, cov) * G).sum(axis=1).tolist()]
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
-        if self._fits % o.excitation_every == 1 or o.excitation_every <= 1 or self._excitation_cache is None:
+        if phase == 1 or self._excitation_cache is None:
             self._excitation_cache = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, v_eval)
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)

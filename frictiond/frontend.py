@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from operator import mul
 from typing import Any, Iterable, Mapping
 
 import numpy as np
@@ -290,17 +291,18 @@ class FrontEnd:
         and four wheels are far too small for numpy's per-call overhead.
         """
         times = self._wheel_times
-        rows = self._wheel_speeds
         n = len(times)
         t_c = float(times[n // 2])
         tau = [t - t_c for t in times]
         h = max(abs(tau[0]), abs(tau[-1])) or 1.0
         u = [x / h for x in tau]
         u2 = [x * x for x in u]
+        # sum(map(mul, ...)): the same products summed in the same order as a generator of
+        # a * b, without a Python frame per term.
         s1 = sum(u)
         s2 = sum(u2)
-        s3 = sum(a * b for a, b in zip(u, u2))
-        s4 = sum(x * x for x in u2)
+        s3 = sum(map(mul, u, u2))
+        s4 = sum(map(mul, u2, u2))
         # Symmetric 3×3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate.
         c00 = s2 * s4 - s3 * s3
         c01 = s2 * s3 - s1 * s4
@@ -312,24 +314,26 @@ class FrontEnd:
         if not det > 1e-9 * max(n * s2 * s4, 1e-300):
             return self._fit_wheels_numpy()
         inv = 1.0 / det
+        threshold = self.options.spike_threshold
+        # The largest residual only matters against the threshold; it starts at 0.0.
+        glitch = 0.0 > threshold
         omega = []
         omega_dot = []
-        worst = 0.0
-        for i in range(4):
-            y = [r[i] for r in rows]
+        for y in zip(*self._wheel_speeds):   # each wheel's speeds over the window
             b0 = sum(y)
-            b1 = sum(a * b for a, b in zip(u, y))
-            b2 = sum(a * b for a, b in zip(u2, y))
+            b1 = sum(map(mul, u, y))
+            b2 = sum(map(mul, u2, y))
             k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv
             k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv
             k2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv
-            for a, a2, yy in zip(u, u2, y):
-                e = abs(yy - (k0 + k1 * a + k2 * a2))
-                if e > worst:
-                    worst = e
+            if not glitch:
+                for a, a2, yy in zip(u, u2, y):
+                    if abs(yy - (k0 + k1 * a + k2 * a2)) > threshold:
+                        glitch = True
+                        break
             omega.append(k0)
             omega_dot.append(k1 / h)
-        return t_c, omega, omega_dot, worst > self.options.spike_threshold
+        return t_c, omega, omega_dot, glitch
 
     def _fit_wheels_numpy(self) -> tuple[float, list[float], list[float], bool]:
         """The same fit by numpy's SVD least squares (for a degenerate spread of timestamps)."""

@@ -223,7 +223,7 @@ def _scaler(conversion: Any) -> tuple[bool, Any, Any]:
 class _MessagePlan:
     """Everything needed to decode one input message quickly."""
 
-    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range", "fields")
+    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range", "to_si", "fields")
 
     def __init__(self, message: Any, signals: list[ResolvedSignal], is_trigger: bool) -> None:
         self.message = message
@@ -232,11 +232,15 @@ class _MessagePlan:
         self.length = message.length
         self.signals = signals
         self.is_trigger = is_trigger
-        # DBC ranges that say something (min < max) mark invalid codes (e.g. 0xFFFF).
+        # DBC ranges that say something (min < max) mark invalid codes (e.g. 0xFFFF); the bounds
+        # carry a relative tolerance of 1e-9 for values scaled to a limit.
         self.check_range = [
-            (s, s.minimum, s.maximum) for s in signals
+            (s, s.minimum - 1e-9 * abs(s.minimum) - 1e-9, s.maximum + 1e-9 * abs(s.maximum) + 1e-9)
+            for s in signals
             if s.minimum is not None and s.maximum is not None and s.minimum < s.maximum
         ]
+        # (DBC signal, canonical name, scale, offset, factor) of each mapped signal: `ResolvedSignal.to_si`.
+        self.to_si = tuple((s.signal, s.name, s.scale, s.offset, s.factor) for s in signals)
         self.fields: tuple | None = None
 
     def compile(self, counter: Any | None) -> None:
@@ -351,17 +355,18 @@ class InputCodec:
         self._check_counter(frame.can_id, raw)
         for s, low, high in plan.check_range:
             value = raw.get(s.signal)
-            if value is not None and not (low - 1e-9 * abs(low) - 1e-9 <= value <= high + 1e-9 * abs(high) + 1e-9):
+            if value is not None and not low <= value <= high:
                 raise DecodeFailure("out of range", f"{plan.name}.{s.signal} = {value}")
         values = {}
-        for s in plan.signals:
-            physical = raw.get(s.signal)
+        isfinite = math.isfinite
+        for signal, name, scale, offset, factor in plan.to_si:
+            physical = raw.get(signal)
             if physical is None:
                 continue  # another multiplexer page
-            v = s.to_si(float(physical))
-            if not math.isfinite(v):
-                raise DecodeFailure("not finite", f"{plan.name}.{s.signal}")
-            values[s.name] = v
+            v = (float(physical) * scale + offset) * factor   # ResolvedSignal.to_si, without the call
+            if not isfinite(v):
+                raise DecodeFailure("not finite", f"{plan.name}.{signal}")
+            values[name] = v
         return DecodedInput(frame.time_s, plan.name, values, plan.is_trigger)
 
     def _check_counter(self, frame_id: int, raw: Mapping[str, Any]) -> None:

@@ -183,6 +183,11 @@ class FrontEnd:
         }
         for m in message_signals:
             self._history.setdefault(m, _MessageHistory(options.default_period))
+        # Each canonical signal's history, looked up once here rather than by message per value.
+        self._source = {name: self._history[m] for name, m in self._signal_message.items()}
+        # Per wheel: the side of the car (−1 left) and half its axle's track.
+        half_front, half_rear = vehicle.track_front / 2, vehicle.track_rear / 2
+        self._wheel_offsets = ((-1.0, half_front), (1.0, half_front), (-1.0, half_rear), (1.0, half_rear))
         self._has_ref_speed = "vehicle_speed_ref" in self._signal_message
         self._has_drive_torque = all(n in self._signal_message for n in DRIVE_TORQUE_NAMES)
         self._has_yaw_rate = "yaw_rate" in self._signal_message
@@ -352,10 +357,10 @@ class FrontEnd:
         return t_c, [float(w) for w in coef[0]], [float(a) for a in coef[1]], glitch
 
     def _value(self, name: str, time_s: float) -> float | None:
-        message = self._signal_message.get(name)
-        if message is None:
+        history = self._source.get(name)
+        if history is None:
             return None
-        return self._history[message].value_at(time_s, name)
+        return history.value_at(time_s, name)
 
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         opts = self.options
@@ -365,7 +370,7 @@ class FrontEnd:
         accel_long_raw = self._value("accel_long", t_c)
         accel_lat = self._value("accel_lat", t_c)
         pressures = [self._value(n, t_c) for n in PRESSURE_NAMES]
-        if accel_long_raw is None or accel_lat is None or any(p is None for p in pressures):
+        if accel_long_raw is None or accel_lat is None or None in pressures:
             return FrontEndResult(None, stale, None)
         if abs(accel_long_raw) > MAX_ABS_ACCEL_MPS2 or abs(accel_lat) > MAX_ABS_ACCEL_MPS2:
             return FrontEndResult(None, stale, "acceleration out of range")
@@ -430,11 +435,9 @@ class FrontEnd:
         forces = []
         mus = []
         usable = []
-        half_tracks = (veh.track_front / 2, veh.track_front / 2, veh.track_rear / 2, veh.track_rear / 2)
-        for i in range(4):
+        for i, (side, half_track) in enumerate(self._wheel_offsets):
             # Each wheel's own ground speed: in a turn the outer wheels travel faster.
-            side = -1.0 if i in (0, 2) else 1.0
-            ground = speed + side * yaw_rate * half_tracks[i]
+            ground = speed + side * yaw_rate * half_track
             denom = max(ground, wheel_linear[i])
             slip = (ground - wheel_linear[i]) / denom if denom > 0.1 else 0.0
             force = (inertia_torques[i] + gain * brake_torques[i] - drive[i]) / radius
@@ -484,7 +487,7 @@ class FrontEnd:
         opts = self.options
         out = [False] * 4
         for i in range(4):
-            others = max(w for j, w in enumerate(wheel_linear) if j != i)
+            others = max(wheel_linear[:i] + wheel_linear[i + 1:])
             w = wheel_linear[i]
             if self._dead[i]:
                 if w > 0.5 * others and w > 0.3:

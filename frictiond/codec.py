@@ -557,9 +557,12 @@ class _Packer:
 
     def _fields(self, values: Mapping[str, Any]) -> tuple | None:
         """The fields of the pages the (clipped) multiplexer values select; None: no such page."""
+        fields, muxes = self.root  # type: ignore[misc]
+        if not muxes:
+            return fields
         if self._flat is None:
             return self._walk(self.root, values)  # type: ignore[arg-type]
-        key = tuple(_clamp(values[name], lo, hi) for name, lo, hi, _ in self.root[1])  # type: ignore[index]
+        key = tuple([_clamp(values[name], lo, hi) for name, lo, hi, _ in muxes])
         fields = self._flat.get(key)
         if fields is None:
             fields = self._walk(self.root, values)  # type: ignore[arg-type]

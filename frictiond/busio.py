@@ -8,6 +8,7 @@ from __future__ import annotations
 import errno
 import locale
 import logging
+import re
 import select
 import socket
 from pathlib import Path
@@ -63,7 +64,6 @@ def _check_suffix(path: Path) -> None:
 # linux/can.h, as python-can's candump reader interprets them
 _CAN_ERR_FLAG = 0x20000000
 _CAN_ERR_BUSERROR = 0x00000080
-_HEX = frozenset("0123456789abcdefABCDEF")
 
 
 def _candump_line_slow(temp: str) -> Frame:
@@ -101,34 +101,35 @@ def _candump_line_slow(temp: str) -> Frame:
     return message_to_frame(msg)
 
 
+# A classical data frame as candump -L and python-can write it: `(time) channel ID#HEX`, optionally
+# ` R`/` T`. Only ASCII digits and plain spaces, so a match reads exactly as python-can reads it.
+_CANDUMP_DATA_LINE = re.compile(r"\((-?[0-9]+\.[0-9]+)\) [!-~]+ ([0-9A-Fa-f]{1,8})#([0-9A-Fa-f]*)(?: [RrTt])?\n?")
+
+
 def _read_candump(path: Path) -> Iterator[Frame]:
     """candump -L `.log` files without building a `can.Message` per line (the common lines).
 
-    Classical data frames (`(t) ch ID#HEX`, optional ` R`/` T`) are parsed here; anything else
-    (CAN FD, remote, error frames, odd digits) goes through the same steps as python-can's reader,
-    so the frames are identical to `message_to_frame` over `can.LogReader`.
+    Classical data frames are parsed here; anything else (CAN FD, remote, error frames, odd
+    digits, other spacing) goes through the same steps as python-can's reader, so the frames are
+    identical to `message_to_frame` over `can.LogReader`.
     """
     encoding = locale.getpreferredencoding(False)
+    match = _CANDUMP_DATA_LINE.fullmatch
     fromhex = bytes.fromhex
-    hexdigits = _HEX
+    new_frame = tuple.__new__   # Frame(...) without its Python-level __new__ (half the cost)
     with path.open("r", encoding=encoding) as fh:
         for line in fh:
+            m = match(line)
+            if m is not None:
+                time_string, id_string, data = m.groups()
+                can_id = int(id_string, 16)
+                if not can_id & _CAN_ERR_FLAG and not len(data) & 1:
+                    yield new_frame(Frame, (float(time_string), can_id & 0x1FFFFFFF, fromhex(data),
+                                            len(id_string) > 3, False, False))
+                    continue
             temp = line.strip()
-            if not temp:
-                continue
-            parts = temp.split()
-            if len(parts) == (4 if temp[-2:].lower() in (" r", " t") else 3):
-                frame = parts[2]
-                k = frame.find("#")
-                id_string = frame[:k]
-                data = frame[k + 1:]
-                if (0 < k <= 8 and not len(data) & 1 and data[:1] != "#" and hexdigits.issuperset(data)
-                        and hexdigits.issuperset(id_string) and parts[0][:1] == "(" and parts[0][-1:] == ")"):
-                    can_id = int(id_string, 16)
-                    if not can_id & _CAN_ERR_FLAG:
-                        yield Frame(float(parts[0][1:-1]), can_id & 0x1FFFFFFF, fromhex(data), k > 3, False, False)
-                        continue
-            yield _candump_line_slow(temp)
+            if temp:
+                yield _candump_line_slow(temp)
 
 
 def read_log(path: str | Path) -> Iterator[Frame]:

@@ -223,7 +223,7 @@ def _scaler(conversion: Any) -> tuple[bool, Any, Any]:
 class _MessagePlan:
     """Everything needed to decode one input message quickly."""
 
-    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range", "fields")
+    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range", "to_si", "fields")
 
     def __init__(self, message: Any, signals: list[ResolvedSignal], is_trigger: bool) -> None:
         self.message = message
@@ -232,11 +232,15 @@ class _MessagePlan:
         self.length = message.length
         self.signals = signals
         self.is_trigger = is_trigger
-        # DBC ranges that say something (min < max) mark invalid codes (e.g. 0xFFFF).
+        # DBC ranges that say something (min < max) mark invalid codes (e.g. 0xFFFF); the bounds
+        # carry a relative tolerance of 1e-9 for values scaled to a limit.
         self.check_range = [
-            (s, s.minimum, s.maximum) for s in signals
+            (s, s.minimum - 1e-9 * abs(s.minimum) - 1e-9, s.maximum + 1e-9 * abs(s.maximum) + 1e-9)
+            for s in signals
             if s.minimum is not None and s.maximum is not None and s.minimum < s.maximum
         ]
+        # (DBC signal, canonical name, scale, offset, factor) of each mapped signal: `ResolvedSignal.to_si`.
+        self.to_si = tuple((s.signal, s.name, s.scale, s.offset, s.factor) for s in signals)
         self.fields: tuple | None = None
 
     def compile(self, counter: Any | None) -> None:
@@ -351,17 +355,18 @@ class InputCodec:
         self._check_counter(frame.can_id, raw)
         for s, low, high in plan.check_range:
             value = raw.get(s.signal)
-            if value is not None and not (low - 1e-9 * abs(low) - 1e-9 <= value <= high + 1e-9 * abs(high) + 1e-9):
+            if value is not None and not low <= value <= high:
                 raise DecodeFailure("out of range", f"{plan.name}.{s.signal} = {value}")
         values = {}
-        for s in plan.signals:
-            physical = raw.get(s.signal)
+        isfinite = math.isfinite
+        for signal, name, scale, offset, factor in plan.to_si:
+            physical = raw.get(signal)
             if physical is None:
                 continue  # another multiplexer page
-            v = s.to_si(float(physical))
-            if not math.isfinite(v):
-                raise DecodeFailure("not finite", f"{plan.name}.{s.signal}")
-            values[s.name] = v
+            v = (float(physical) * scale + offset) * factor   # ResolvedSignal.to_si, without the call
+            if not isfinite(v):
+                raise DecodeFailure("not finite", f"{plan.name}.{signal}")
+            values[name] = v
         return DecodedInput(frame.time_s, plan.name, values, plan.is_trigger)
 
     def _check_counter(self, frame_id: int, raw: Mapping[str, Any]) -> None:
@@ -468,18 +473,30 @@ def _clip(signal: Any, value: float) -> float:
 
 
 # -------------------------------------------------------------------------------- outputs
-class _Packer:
-    """`message.encode(values, scaling=True, strict=False, padding=False)` with shifts and masks.
+def _clamp(value: Any, lo: float, hi: float) -> Any:
+    """A value within [lo, hi]; NaN → lo (never NaN on the bus)."""
+    return min(max(value, lo), hi) if value == value else lo
 
-    Mirrors cantools' walk of the codec tree (multiplexed pages included), precompiled per node;
-    a message it cannot reproduce bit for bit (float or overlapping signals, containers), or a raw
-    value outside its field, goes to cantools itself.
+
+class _Packer:
+    """`message.encode(clipped values, scaling=True, strict=False, padding=False)` with shifts and masks.
+
+    Each value is first clipped to what its signal can carry (`limits`, NaN → the low limit).
+    Mirrors cantools' walk of the codec tree (multiplexed pages included), flattened per page
+    into one list of fields; a message it cannot reproduce bit for bit (float or overlapping
+    signals, containers), or a raw value outside its field, goes to cantools itself.
     """
 
-    def __init__(self, message: Any) -> None:
+    def __init__(self, message: Any, limits: Mapping[str, tuple[float, float]]) -> None:
         self.message = message
         self.length = message.length
+        self.limits = limits
         self.root = self._compile(message._codecs) if not message.is_container and _packable(message) else None
+        # Flattened fields by the top-level multiplexer values; only when no page nests another
+        # multiplexer (then those values alone choose the fields).
+        self._flat: dict[tuple, tuple] | None = None
+        if self.root is not None and not any(sub[1] for _, _, _, pages in self.root[1] for sub in pages.values()):
+            self._flat = {}
 
     def _compile(self, node: dict) -> tuple:
         fields = []
@@ -489,41 +506,95 @@ class _Packer:
                 low, high = -(1 << (sig.length - 1)), (1 << (sig.length - 1)) - 1
             else:
                 low, high = 0, mask
-            fields.append((sig.name, sig.conversion.numeric_scaled_to_raw, little, shift, mask, low, high))
+            lo, hi = self.limits[sig.name]
+            scale, offset, to_raw = _raw_of(sig.conversion)
+            fields.append((sig.name, lo, hi, scale, offset, to_raw, little, shift, mask, low, high))
         muxes = tuple(
-            (name, {mux: self._compile(sub) for mux, sub in pages.items()})
+            (name, *self.limits[name], {mux: self._compile(sub) for mux, sub in pages.items()})
             for name, pages in node["multiplexers"].items()
         )
         return tuple(fields), muxes
 
-    def encode(self, values: dict[str, Any]) -> bytes:
-        if self.root is None:
-            return bytes(self.message.encode(values, scaling=True, strict=False, padding=False))
-        words = [0, 0]  # big-endian-read, little-endian-read payload integers
-        if not self._pack(self.root, values, words):
-            return bytes(self.message.encode(values, scaling=True, strict=False, padding=False))
-        n = self.length
-        little = words[1].to_bytes(n, "little")
-        return (int.from_bytes(little, "big") | words[0]).to_bytes(n, "big")
+    def encode(self, values: Mapping[str, Any]) -> bytes:
+        fields = None
+        if self.root is not None:
+            fields = self._fields(values)
+        if fields is not None:
+            big = little_word = 0  # the payload read as a big-endian and as a little-endian integer
+            for name, lo, hi, scale, offset, to_raw, little, shift, mask, low, high in fields:
+                value = values[name]
+                if value != value:
+                    value = lo  # NaN
+                else:  # min(max(value, lo), hi), without the calls
+                    if lo > value:
+                        value = lo
+                    if hi < value:
+                        value = hi
+                if not isinstance(value, (int, float)):
+                    break  # choice names and the like: cantools' own path
+                if to_raw is not None:
+                    raw = to_raw(value)
+                elif scale is None:
+                    raw = round(value)  # IdentityConversion.numeric_scaled_to_raw
+                else:
+                    raw = round((value - offset) / scale)  # LinearConversion.numeric_scaled_to_raw
+                if not low <= raw <= high:
+                    break
+                if little:
+                    little_word |= (raw & mask) << shift
+                else:
+                    big |= (raw & mask) << shift
+            else:
+                n = self.length
+                if not big:
+                    return little_word.to_bytes(n, "little")
+                little_bytes = little_word.to_bytes(n, "little")
+                return (int.from_bytes(little_bytes, "big") | big).to_bytes(n, "big")
+        clipped = {}
+        for name, value in values.items():
+            clipped[name] = _clamp(value, *self.limits[name])
+        return bytes(self.message.encode(clipped, scaling=True, strict=False, padding=False))
 
-    def _pack(self, node: tuple, values: dict[str, Any], words: list[int]) -> bool:
+    def _fields(self, values: Mapping[str, Any]) -> tuple | None:
+        """The fields of the pages the (clipped) multiplexer values select; None: no such page."""
+        fields, muxes = self.root  # type: ignore[misc]
+        if not muxes:
+            return fields
+        if self._flat is None:
+            return self._walk(self.root, values)  # type: ignore[arg-type]
+        key = tuple([_clamp(values[name], lo, hi) for name, lo, hi, _ in muxes])
+        fields = self._flat.get(key)
+        if fields is None:
+            fields = self._walk(self.root, values)  # type: ignore[arg-type]
+            if fields is not None:
+                self._flat[key] = fields
+        return fields
+
+    def _walk(self, node: tuple, values: Mapping[str, Any]) -> tuple | None:
         fields, muxes = node
-        for name, to_raw, little, shift, mask, low, high in fields:
-            value = values[name]
+        for name, lo, hi, pages in muxes:
+            value = _clamp(values[name], lo, hi)
             if not isinstance(value, (int, float)):
-                return False  # choice names and the like: cantools' own path
-            raw = to_raw(value)
-            if not low <= raw <= high:
-                return False
-            words[little] |= (raw & mask) << shift
-        for name, pages in muxes:
-            value = values[name]
-            if not isinstance(value, (int, float)):
-                return False
+                return None
             sub = pages.get(value)
-            if sub is None or not self._pack(sub, values, words):
-                return False
-        return True
+            if sub is None:
+                return None
+            sub_fields = self._walk(sub, values)
+            if sub_fields is None:
+                return None
+            fields = fields + sub_fields
+        return fields
+
+
+def _raw_of(conversion: Any) -> tuple[float | None, float, Any]:
+    """(scale, offset, None) for the integer conversions `_Packer` computes inline (scale None:
+    identity); (None, 0, conversion.numeric_scaled_to_raw) for any other, called as is."""
+    kind = type(conversion).__name__
+    if kind == "IdentityConversion" and not conversion.is_float:
+        return None, 0, None
+    if kind == "LinearConversion" and not conversion.is_float:
+        return conversion.scale, conversion.offset, None
+    return None, 0, conversion.numeric_scaled_to_raw
 
 
 def _packable(message: Any) -> bool:
@@ -565,20 +636,17 @@ class OutputCodec:
         self.wheel_id: int = self.wheel_message.frame_id
         self._signals = {m.frame_id: {s.name: s for s in m.signals} for m in (self.estimate_message, self.wheel_message)}
         self._counters = {self.estimate_id: 0, self.wheel_id: 0}
-        self._limits = {fid: {name: _limits(sig) for name, sig in sigs.items()} for fid, sigs in self._signals.items()}
         self._counter_bit = {
             fid: sigs["Counter"].start for fid, sigs in self._signals.items()
         }
-        self._packers = {m.frame_id: _Packer(m) for m in (self.estimate_message, self.wheel_message)}
+        self._packers = {
+            fid: _Packer(m, {name: _limits(sig) for name, sig in self._signals[fid].items()})
+            for fid, m in ((self.estimate_id, self.estimate_message), (self.wheel_id, self.wheel_message))
+        }
         self.e2e = E2EChecker()
 
     def _encode(self, frame_id: int, message: Any, values: dict[str, float]) -> bytes:
-        limits = self._limits[frame_id]
-        clipped = {}
-        for k, v in values.items():
-            lo, hi = limits[k]
-            clipped[k] = min(max(v, lo), hi) if v == v else lo  # NaN → the low limit
-        payload = bytearray(self._packers[frame_id].encode(clipped))
+        payload = bytearray(self._packers[frame_id].encode(values))
         counter = self._counters[frame_id]
         self._counters[frame_id] = (counter + 1) & 0x0F
         return bytes(protect(frame_id, payload, counter, self._counter_bit[frame_id]))

@@ -31,7 +31,10 @@ def crc8_sae_j1850(data: bytes | bytearray, crc: int = 0xFF) -> int:
 
 def e2e_crc(data_id: int, payload: bytes | bytearray) -> int:
     """The `Crc` byte for a frame: over Data ID (low, high) then payload bytes 1..7."""
-    return crc8_sae_j1850(bytes((data_id & 0xFF, (data_id >> 8) & 0xFF)) + bytes(payload[1:8]))
+    # The table steps of crc8_sae_j1850 over the two ID bytes, without building a joined copy.
+    crc = _TABLE[0xFF ^ (data_id & 0xFF)]
+    crc = _TABLE[crc ^ ((data_id >> 8) & 0xFF)]
+    return crc8_sae_j1850(payload[1:8], crc)
 
 
 def protect(data_id: int, payload: bytearray, counter: int, counter_bit: int = 8) -> bytearray:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from operator import mul
 from typing import Any, Iterable, Mapping
 
 import numpy as np
@@ -182,6 +183,11 @@ class FrontEnd:
         }
         for m in message_signals:
             self._history.setdefault(m, _MessageHistory(options.default_period))
+        # Each canonical signal's history, looked up once here rather than by message per value.
+        self._source = {name: self._history[m] for name, m in self._signal_message.items()}
+        # Per wheel: the side of the car (−1 left) and half its axle's track.
+        half_front, half_rear = vehicle.track_front / 2, vehicle.track_rear / 2
+        self._wheel_offsets = ((-1.0, half_front), (1.0, half_front), (-1.0, half_rear), (1.0, half_rear))
         self._has_ref_speed = "vehicle_speed_ref" in self._signal_message
         self._has_drive_torque = all(n in self._signal_message for n in DRIVE_TORQUE_NAMES)
         self._has_yaw_rate = "yaw_rate" in self._signal_message
@@ -291,17 +297,18 @@ class FrontEnd:
         and four wheels are far too small for numpy's per-call overhead.
         """
         times = self._wheel_times
-        rows = self._wheel_speeds
         n = len(times)
         t_c = float(times[n // 2])
         tau = [t - t_c for t in times]
         h = max(abs(tau[0]), abs(tau[-1])) or 1.0
         u = [x / h for x in tau]
         u2 = [x * x for x in u]
+        # sum(map(mul, ...)): the same products summed in the same order as a generator of
+        # a * b, without a Python frame per term.
         s1 = sum(u)
         s2 = sum(u2)
-        s3 = sum(a * b for a, b in zip(u, u2))
-        s4 = sum(x * x for x in u2)
+        s3 = sum(map(mul, u, u2))
+        s4 = sum(map(mul, u2, u2))
         # Symmetric 3×3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate.
         c00 = s2 * s4 - s3 * s3
         c01 = s2 * s3 - s1 * s4
@@ -313,24 +320,26 @@ class FrontEnd:
         if not det > 1e-9 * max(n * s2 * s4, 1e-300):
             return self._fit_wheels_numpy()
         inv = 1.0 / det
+        threshold = self.options.spike_threshold
+        # The largest residual only matters against the threshold; it starts at 0.0.
+        glitch = 0.0 > threshold
         omega = []
         omega_dot = []
-        worst = 0.0
-        for i in range(4):
-            y = [r[i] for r in rows]
+        for y in zip(*self._wheel_speeds):   # each wheel's speeds over the window
             b0 = sum(y)
-            b1 = sum(a * b for a, b in zip(u, y))
-            b2 = sum(a * b for a, b in zip(u2, y))
+            b1 = sum(map(mul, u, y))
+            b2 = sum(map(mul, u2, y))
             k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv
             k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv
             k2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv
-            for a, a2, yy in zip(u, u2, y):
-                e = abs(yy - (k0 + k1 * a + k2 * a2))
-                if e > worst:
-                    worst = e
+            if not glitch:
+                for a, a2, yy in zip(u, u2, y):
+                    if abs(yy - (k0 + k1 * a + k2 * a2)) > threshold:
+                        glitch = True
+                        break
             omega.append(k0)
             omega_dot.append(k1 / h)
-        return t_c, omega, omega_dot, worst > self.options.spike_threshold
+        return t_c, omega, omega_dot, glitch
 
     def _fit_wheels_numpy(self) -> tuple[float, list[float], list[float], bool]:
         """The same fit by numpy's SVD least squares (for a degenerate spread of timestamps)."""
@@ -349,10 +358,10 @@ class FrontEnd:
         return t_c, [float(w) for w in coef[0]], [float(a) for a in coef[1]], glitch
 
     def _value(self, name: str, time_s: float) -> float | None:
-        message = self._signal_message.get(name)
-        if message is None:
+        history = self._source.get(name)
+        if history is None:
             return None
-        return self._history[message].value_at(time_s, name)
+        return history.value_at(time_s, name)
 
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         opts = self.options
@@ -362,7 +371,7 @@ class FrontEnd:
         accel_long_raw = self._value("accel_long", t_c)
         accel_lat = self._value("accel_lat", t_c)
         pressures = [self._value(n, t_c) for n in PRESSURE_NAMES]
-        if accel_long_raw is None or accel_lat is None or any(p is None for p in pressures):
+        if accel_long_raw is None or accel_lat is None or None in pressures:
             return FrontEndResult(None, stale, None)
         if abs(accel_long_raw) > MAX_ABS_ACCEL_MPS2 or abs(accel_lat) > MAX_ABS_ACCEL_MPS2:
             return FrontEndResult(None, stale, "acceleration out of range")
@@ -427,11 +436,9 @@ class FrontEnd:
         forces = []
         mus = []
         usable = []
-        half_tracks = (veh.track_front / 2, veh.track_front / 2, veh.track_rear / 2, veh.track_rear / 2)
-        for i in range(4):
+        for i, (side, half_track) in enumerate(self._wheel_offsets):
             # Each wheel's own ground speed: in a turn the outer wheels travel faster.
-            side = -1.0 if i in (0, 2) else 1.0
-            ground = speed + side * yaw_rate * half_tracks[i]
+            ground = speed + side * yaw_rate * half_track
             denom = max(ground, wheel_linear[i])
             slip = (ground - wheel_linear[i]) / denom if denom > 0.1 else 0.0
             force = (inertia_torques[i] + gain * brake_torques[i] - drive[i]) / radius
@@ -481,7 +488,7 @@ class FrontEnd:
         opts = self.options
         out = [False] * 4
         for i in range(4):
-            others = max(w for j, w in enumerate(wheel_linear) if j != i)
+            others = max(wheel_linear[:i] + wheel_linear[i + 1:])
             w = wheel_linear[i]
             if self._dead[i]:
                 if w > 0.5 * others and w > 0.3:

@@ -62,6 +62,16 @@ def pressure_stuck_at_zero(frames, codec: InputCodec, start_s: float, end_s: flo
     return _rewrite(frames, codec, start_s, end_s, change)
 
 
+def pressure_scaled(frames, codec: InputCodec, factor: float) -> list[Frame]:
+    """Every brake pressure reads `factor` times the truth (a wrong DBC scale, a sensor gone off)."""
+    def change(message: str, values: dict[str, float]) -> None:
+        for k in values:
+            if k.startswith("brake_pressure"):
+                values[k] *= factor
+
+    return _rewrite(frames, codec, float("-inf"), float("inf"), change)
+
+
 def accel_offset(frames, codec: InputCodec, offset_mps2: float, start_s: float = 0.0) -> list[Frame]:
     """The longitudinal accelerometer reads `offset` too high (mounting, calibration)."""
     def change(message: str, values: dict[str, float]) -> None:

@@ -204,6 +204,8 @@ class FrontEnd:
         self._accel_bias_samples = 0
         self._brake_gain_factor = 1.0
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T·needed
+        self._recent_sum_tt = self._recent_sum_far = 0.0   # the same over ~0.2 s, and of far samples
+        self._brake_model_holds = True
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
         self._ref_disagreements = 0
@@ -453,6 +455,7 @@ class FrontEnd:
                 and not stuck[i]
                 and not dead[i]
                 and math.isfinite(mu)
+                and self._brake_model_holds
             )
             slips.append(slip)
             forces.append(force)
@@ -470,7 +473,8 @@ class FrontEnd:
             braking=braking,
             speed_from_reference=from_ref,
         )
-        fault = "wheel speed glitch" if glitch else ("wheel speed stuck" if any(stuck) else None)
+        fault = ("wheel speed glitch" if glitch else "wheel speed stuck" if any(stuck)
+                 else None if self._brake_model_holds or not braking else "brake pressure disagrees with deceleration")
         return FrontEndResult(sample, stale, fault, tuple(i for i in range(4) if dead[i]))
 
     def _dead_wheels(self, time_s: float, wheel_linear: list[float], braked: list[bool]) -> list[bool]:
@@ -616,14 +620,26 @@ class FrontEnd:
         ratio = (total_force * veh.wheel_radius - other) / total_brake
         if not math.isfinite(ratio):
             return      # a NaN here would stay in the sums for good
+        # Far outside the limits, the pressures do not say what the brakes do (a pressure signal
+        # scaled wrong, a sensor drifting by a factor): when most of the last 0.2 s of braking
+        # (brake-torque weighted, no prior) is like that, no wheel's μ is trusted and the front
+        # end reports a fault.
+        far = not (1.0 - lim) / _BRAKE_MODEL_MARGIN <= ratio <= (1.0 + lim) * _BRAKE_MODEL_MARGIN
         ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
         keep = 1.0 - min(1.0, opts.default_period / max(opts.brake_gain_time_constant, 1e-3))
-        self._gain_sum_tt = keep * self._gain_sum_tt + total_brake * total_brake
-        self._gain_sum_tn = keep * self._gain_sum_tn + total_brake * total_brake * ratio
+        weight = total_brake * total_brake
+        self._gain_sum_tt = keep * self._gain_sum_tt + weight
+        self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
+        recent = 1.0 - min(1.0, opts.default_period / _BRAKE_MODEL_WINDOW_S)
+        self._recent_sum_tt = recent * self._recent_sum_tt + weight
+        self._recent_sum_far = recent * self._recent_sum_far + (weight if far else 0.0)
         self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
+        self._brake_model_holds = self._recent_sum_far <= 0.5 * self._recent_sum_tt
 
 
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying gain 1
+_BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
+_BRAKE_MODEL_WINDOW_S = 0.2                 # ... in most of the braking of about this long
 
 
 def make_front_end(

@@ -291,3 +291,18 @@ def test_long_stop_with_many_faults(default_config):
         assert flagged_share(estimates, t0, t1) >= 0.9, (t0, t1)
     tail = [e.status for e in estimates if e.time_s < 0 and unshift(e.time_s) > 6.5]
     assert tail and tail.count(Status.VALID) > 0.5 * len(tail)
+
+
+@pytest.mark.parametrize("factor", [0.5, 2.5])
+@pytest.mark.parametrize("scenario", ["dry", "snow", "ice"])
+def test_brake_pressures_off_by_a_factor_are_a_fault_not_an_estimate(default_config, scenario, factor):
+    # The brake-gain check cannot absorb a factor of 2: the body equation disagrees with the
+    # pressures for most of the braking, which must show as FAULT, never as a VALID μ.
+    frames, sim = simulate_frames(default_config, scenario, seed=2)
+    pipeline = Pipeline(default_config)
+    _, estimates, bad = faults.replay_on_bus(default_config, faults.pressure_scaled(frames, pipeline.input_codec, factor),
+                                             pipeline=pipeline)
+    assert not bad
+    assert not [e for e in estimates if e.status == Status.VALID]
+    assert pipeline.stats.faults["brake pressure disagrees with deceleration"] > 100
+    assert Status.FAULT in {e.status for e in estimates}

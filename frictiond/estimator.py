@@ -2,20 +2,19 @@
 
 Design (the choices model.md leaves open, and why):
 
-- Identified: one road parameter θ per wheel (split-μ must show per wheel), fitted as ln θ, and, pooled over the
-  wheels, the bristle stiffness σ0 (slip stiffness σ0·L/2), the Stribeck speed v_s (how the peak
-  moves with sliding speed) and the viscous σ2 (the shape beyond the peak). Fitting static LuGre
-  to Burckhardt and Magic Formula curves on every surface, these four reproduce the peak within
-  ~1 %; without σ2 and v_s the error reaches 20–100 % on low-μ surfaces. μ_c, μ_s, α and L are
-  held at their published values: with θ free they are not separately identifiable (θ and the
-  g-scale multiply), and with σ0 free L is redundant.
+- Identified: one road parameter θ per wheel (split-μ must show per wheel), fitted as ln θ,
+  and, pooled over the wheels, the bristle stiffness σ0 (slip stiffness σ0·L/2), the Stribeck
+  speed v_s (how the peak moves with sliding speed) and the viscous σ2 (the shape beyond the
+  peak). Fitting static LuGre to Burckhardt and Magic Formula curves on every surface, these
+  four reproduce the peak within ~1 %; without σ2 and v_s the error reaches 20–100 % on low-μ
+  surfaces. μ_c, μ_s, α and L are held at their published values: with θ free they are not
+  separately identifiable (θ and the g-scale multiply), and with σ0 free L is redundant.
 - Priors: every free parameter is regularised toward a prior (nominal values, or the state
   saved from the last run), so unexcited directions stay put instead of wandering. θ scales
   μ as 1/θ and spans 1 (dry asphalt) to ~30 (ice): its prior is on ln θ, a relative
-  uncertainty, or an absolute one strong enough to hold θ on dry roads would keep it far
-  from ice (fits stalled at twice ice's μ_max). The θ of the
-  front and rear wheel on one side are tied by a soft constraint (they roll on the same track);
-  left and right only weakly (split-μ).
+  uncertainty; an absolute one strong enough to hold θ on dry roads kept it far from ice (fits
+  stalled at twice ice's μ_max). The ln θ of the front and rear wheel on one side are tied by a
+  soft constraint (they roll on the same track); left and right only weakly (split-μ).
 - Window: samples older than `window_s` are dropped, the rest weighted by exp(−age/τ). A change
   detector watches the newest residuals: when they agree on a sign well beyond the noise (a μ
   jump), older samples are dropped at once, so the fit re-converges in a fraction of a second.
@@ -232,7 +231,6 @@ class LugreTrustRegionEstimator:
         self._tie_b = np.array([2, 3, 1, 3])
         self._tie_rel = np.array([o.front_rear_coupling, o.front_rear_coupling,
                                   o.left_right_coupling, o.left_right_coupling])
-        self._tie_rows = np.arange(len(self._tie_a))
         if self._scale[0] != 1.0:
             raise AssertionError("ln θ is fitted unscaled")
         self._work: np.ndarray | None = None

@@ -203,7 +203,7 @@ class FrontEnd:
         self._accel_bias_mps2 = 0.0
         self._accel_bias_samples = 0
         self._brake_gain_factor = 1.0
-        self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T·needed
+        self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
         self._recent_sum_tt = self._recent_sum_far = 0.0   # the same over ~0.2 s, and of far samples
         self._brake_model_holds = True
         self._last_trigger_s = -math.inf

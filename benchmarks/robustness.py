@@ -1,5 +1,6 @@
 """The LuGre estimator on cases the accuracy benchmark does not have: every surface under every
-truth family at 12 and 35 m/s, a car 25 % heavier than configured, pad gains off by −15/+15 %.
+truth family at 12 and 35 m/s, a car 25 % heavier than configured, pad gains off by −15/+15 %, and
+a large SUV (2450 kg, 0.37 m wheels, its own brake gains) configured as such.
 
 Tuning is done on `accuracy.py`'s set; this sweep is the check that it holds elsewhere. Prints
 per case the truth, MAE, VALID share, convergence and false VALID, and marks the cases that miss
@@ -25,23 +26,32 @@ from frictiond.simulator.run import simulate
 from frictiond.simulator.scenarios import Scenario
 
 
-def cases() -> list[tuple[str, Scenario]]:
+# A large SUV, for the estimator and the simulated car alike: other mass, geometry, wheels, brakes.
+SUV = dict(mass=2450.0, cg_to_front_axle=1.35, cg_to_rear_axle=1.65, cg_height=0.72, track_front=1.68,
+           track_rear=1.70, wheel_radius=0.37, wheel_inertia=2.1, brake_gain_front=38.0, brake_gain_rear=20.0,
+           drag_area_coefficient=0.55)
+
+
+def cases() -> list[tuple[str, Scenario, dict]]:
     out = []
     for surface, family, v0 in itertools.product(("dry", "wet", "snow", "ice"), ("burckhardt", "magic-formula", "lugre"),
                                                  (12.0, 35.0)):
         out.append((f"{surface}/{family}/{v0:.0f} m/s",
-                    Scenario(surface, "sweep", (surface,) * 4, family, initial_speed_mps=v0)))
+                    Scenario(surface, "sweep", (surface,) * 4, family, initial_speed_mps=v0), {}))
     for surface in ("dry", "wet", "snow"):
         out.append((f"{surface}/loaded +25 %", Scenario(surface, "sweep", (surface,) * 4, "magic-formula",
-                                                        load_factor=1.25)))
+                                                        load_factor=1.25), {}))
         out.append((f"{surface}/pads 0.85|1.15", Scenario(surface, "sweep", (surface,) * 4, "burckhardt",
-                                                          brake_gain_factor=(0.85, 1.15))))
+                                                          brake_gain_factor=(0.85, 1.15)), {}))
+    for surface, family in (("dry", "magic-formula"), ("wet", "burckhardt"), ("snow", "lugre"), ("ice", "burckhardt")):
+        out.append((f"{surface}/SUV", Scenario(surface, "sweep", (surface,) * 4, family), SUV))
     return out
 
 
-def run(job: tuple[str, Scenario, int]):
-    label, scenario, seed = job
+def run(job: tuple[str, Scenario, dict, int]):
+    label, scenario, vehicle, seed = job
     config = load_config(default_config_path())
+    config = dataclasses.replace(config, vehicle=dataclasses.replace(config.vehicle, **vehicle))
     codec = input_codec_for(config)
     result = simulate(scenario, config.vehicle, schedules_for(codec), seed=seed)
     recorder = ReplayRecorder()
@@ -55,7 +65,7 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
-    jobs = [(label, scn, seed) for label, scn in cases() for seed in range(args.seeds)]
+    jobs = [(label, scn, vehicle, seed) for label, scn, vehicle in cases() for seed in range(args.seeds)]
     with ProcessPoolExecutor(max(1, args.jobs)) as pool:
         results = list(pool.map(run, jobs))
     print(f"{'case':26s} {'truth':>6s} {'MAE':>6s} {'MAE%':>5s} {'valid%':>6s} {'conv s':>6s} {'false VALID':>11s}")

@@ -41,14 +41,9 @@ class TrustRegionResult:
     evaluations: int
 
 
-def _scaling(x: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Coleman–Li v(x) and its derivative (diagonal)."""
-    upper = (g < 0) & np.isfinite(ub)
-    lower = (g > 0) & np.isfinite(lb)
-    return _scaling_masked(x, upper, lower, lb, ub)
-
-
-def _scaling_masked(x, upper, lower, lb, ub) -> tuple[np.ndarray, np.ndarray]:
+def _scaling(x, upper, lower, lb, ub) -> tuple[np.ndarray, np.ndarray]:
+    """Coleman–Li v(x) and its derivative (diagonal); `upper`/`lower` mark the coordinates whose
+    gradient points at a finite upper/lower bound."""
     v = np.where(lower, x - lb, np.where(upper, ub - x, 1.0))
     dv = lower.astype(float) - upper
     return v, dv
@@ -201,12 +196,12 @@ def solve_normal(
     cost, g, N, extra = initial if initial is not None else fun(x)
     evaluations = 1
     if radius is None or not math.isfinite(radius) or radius <= 0:
-        v, _ = _scaling_masked(x, (g < 0) & fin_ub, (g > 0) & fin_lb, lb, ub)
+        v, _ = _scaling(x, (g < 0) & fin_ub, (g > 0) & fin_lb, lb, ub)
         radius = math.sqrt(float(np.sum(x * x / v))) or 1.0
     converged = False
     iterations = 0
     # The n-vectors (a handful of entries) are handled as floats: fused loops instead of a
-    # dozen numpy calls on tiny arrays per iteration. Same operations as `_scaling` & co.
+    # dozen numpy calls on tiny arrays per iteration. Same operations as `_scaling`.
     n = len(x)
     sqrt = math.sqrt
     diagonal = (np.arange(n), np.arange(n))

@@ -40,6 +40,9 @@ MAX_WHEEL_SPEED_RADPS = 400.0
 MAX_ABS_ACCEL_MPS2 = 30.0
 FREE_ROLLING_SPREAD = 0.04     # relative wheel-speed spread a curve can explain without any slip
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
+_BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
+_BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
+_BRAKE_MODEL_WINDOW_S = 0.2                 # ... in most of the braking of about this long
 MAX_PRESSURE_BAR = 350.0
 MAX_SPEED_MPS = 120.0
 
@@ -108,10 +111,9 @@ class _MessageHistory:
     its signals per frame, and a page's value must keep the time of the frame that carried it.
     """
 
-    __slots__ = ("times", "series", "period_s", "last_arrival_s", "merged")
+    __slots__ = ("series", "period_s", "last_arrival_s", "merged")
 
     def __init__(self, period_s: float) -> None:
-        self.times: deque[float] = deque(maxlen=16)
         self.series: dict[str, tuple[deque[float], deque[float]]] = {}
         self.period_s = period_s
         self.last_arrival_s = -math.inf
@@ -119,9 +121,8 @@ class _MessageHistory:
 
     def push(self, time_s: float, values: Mapping[str, float]) -> None:
         series = self.series
-        if self.times and time_s < self.times[-1]:
+        if time_s < self.last_arrival_s:
             # Time went backwards (log splice, clock step): the old history means nothing now.
-            self.times.clear()
             series.clear()
         merged = self.merged
         for name, value in values.items():
@@ -131,7 +132,6 @@ class _MessageHistory:
                 pair = series[name] = (deque(maxlen=16), deque(maxlen=16))
             pair[0].append(time_s)
             pair[1].append(value)
-        self.times.append(time_s)
         self.last_arrival_s = time_s
 
     def value_at(self, time_s: float, name: str) -> float | None:
@@ -573,9 +573,8 @@ class FrontEnd:
     def _ref_fresh(self, time_s: float) -> bool:
         message = self._signal_message["vehicle_speed_ref"]
         h = self._history[message]
-        return time_s - h.last_arrival_s <= self.options.stale_periods * h.period_s + 1e-3 or (
-            h.times and h.times[-1] >= time_s
-        )
+        return (time_s - h.last_arrival_s <= self.options.stale_periods * h.period_s + 1e-3
+                or h.last_arrival_s >= time_s)
 
     def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float) -> None:
         # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
@@ -636,10 +635,6 @@ class FrontEnd:
         self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
         self._brake_model_holds = self._recent_sum_far <= 0.5 * self._recent_sum_tt
 
-
-_BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying gain 1
-_BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
-_BRAKE_MODEL_WINDOW_S = 0.2                 # ... in most of the braking of about this long
 
 
 def make_front_end(

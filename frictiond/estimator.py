@@ -465,7 +465,7 @@ class LugreTrustRegionEstimator:
     def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
         """Unweighted Jacobian rows and model − measurement of window samples [lo, hi) at x.
 
-        `out` (8, hi − lo): rows 0–3 ∂μ/∂θ_wheel (one-hot), 4–6 ∂μ/∂(σ0, v_s, σ2) in the scaled
+        `out` (8, hi − lo): rows 0–3 ∂μ/∂ln θ_wheel (one-hot), 4–6 ∂μ/∂(σ0, v_s, σ2) in the scaled
         variables, 7 μ_model − μ_meas. The formulas of `braking_mu_and_partials`, on the
         window's precomputed per-sample columns.
         """
@@ -473,7 +473,7 @@ class LugreTrustRegionEstimator:
         b = self._base
         sc4, sc5, sc6 = self._shared_scale
         sigma0, v_s, sigma2 = float(x[4]) * sc4, float(x[5]) * sc5, float(x[6]) * sc6
-        thetas = np.exp(x[:N_WHEELS])
+        thetas = self._thetas(x)
         wheel = w.wheel[lo:hi]
         alpha = self._alpha
         dmu = b.mu_s - b.mu_c
@@ -487,10 +487,7 @@ class LugreTrustRegionEstimator:
         Z /= g
         if hi > lo and Z.min() < _SMALL_Z:
             partials = np.empty((hi - lo, 4))
-            lv = w.lam_v[lo:hi]
-            lam = np.minimum(w.slip[lo:hi], MAX_MODEL_SLIP)
-            speed = np.divide(lv, lam, out=np.array(w.speed[lo:hi]), where=lam > 0)
-            model = braking_mu_and_partials(lam, speed, thetas[wheel], self._params(x), partials)
+            model = braking_mu_and_partials(w.slip[lo:hi], w.speed[lo:hi], thetas[wheel], self._params(x), partials)
             partials[:, 0] *= thetas[wheel]     # ∂/∂ln θ
             np.multiply(w.onehot[:, lo:hi], partials[:, 0], out=out[:N_WHEELS])
             out[4] = partials[:, 1] * sc4
@@ -579,7 +576,7 @@ class LugreTrustRegionEstimator:
             fresh = rows = np.empty((w.rows.shape[0], hi - lo))
             self._rows(x, lo, hi, rows)
         # One product gives JᵀJ, Jᵀr and rᵀr: the weighted data rows, then the prior rows
-        # (x − prior)/std and the tie rows (θ_a − θ_b)/(rel·θ̄) appended as further columns.
+        # (x − prior)/std and the tie rows (ln θ_a − ln θ_b)/rel appended as further columns.
         m = hi - lo
         n = len(x)
         B = np.empty((n + 1, m + n + N_WHEELS))

@@ -630,11 +630,7 @@ class LugreTrustRegionEstimator:
         # Do not extrapolate far beyond the data: when the fitted curve keeps rising past
         # `peak_extrapolation`× the slips actually seen (a monotone fit of a flat-topped road),
         # μ_max is read at that slip instead of at a "peak" near lock.
-        # The three slow-moving refreshes (slip range, covariance, excitation) fall on different
-        # fits of each `excitation_every`: together on one fit they made every third update the
-        # slowest (the p99 of the update and of the daemon's latency).
-        phase = self._fits % o.excitation_every if o.excitation_every > 1 else 1
-        if phase == 0 or self._slip_support is None:
+        if self._due(0) or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(slip, wheel, weights)
         cap = self._slip_support * o.peak_extrapolation
         beyond = wheel_lam > cap
@@ -658,7 +654,7 @@ class LugreTrustRegionEstimator:
         w_sum = float(weights.sum())
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, float(r_data @ r_data) / dof)
-        if self._cov is None or phase == 2 or o.excitation_every <= 2:
+        if self._cov is None or self._due(2):
             # Parameters held at a bound are fixed there for the covariance: the unconstrained
             # Gauss–Newton covariance would count spread into the infeasible side. Like the
             # excitation, it changes slowly: refreshed every few fits.
@@ -682,7 +678,7 @@ class LugreTrustRegionEstimator:
         wheel_std = [math.sqrt(max(v, 0.0)) if v == v else v for v in (np.dot(G, cov) * G).sum(axis=1).tolist()]
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
-        if phase == 1 or self._excitation_cache is None:
+        if self._due(1) or self._excitation_cache is None:
             self._excitation_cache = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, v_eval)
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
@@ -712,6 +708,14 @@ class LugreTrustRegionEstimator:
         if status == Status.VALID:
             self._last_valid = estimate
         return estimate
+
+    def _due(self, step: int) -> bool:
+        """Whether this fit refreshes one of the slow-moving quantities (0 slip range, 1 excitation,
+        2 covariance): each every `excitation_every` fits, on different fits so that together they
+        do not make every third update the slowest (the p99 of the update and of the daemon's
+        latency); every fit when `excitation_every` ≤ 1."""
+        every = self.options.excitation_every
+        return every <= 1 or self._fits % every == step % every
 
     def _confidence(self, now_s: float, mu_max: float, mu_std: float, excitation: float) -> float:
         """0…1: how much to trust μ_max now.

@@ -233,3 +233,16 @@ def test_a_cycle_without_usable_wheels_keeps_the_running_fit():
     assert held[:len(kept)] == kept and kept[-1].time_s - fitted.time_s >= 0.3
     # Once the window has run dry, the prior again.
     assert all(e.status == Status.NOT_EXCITED for e in held[len(kept):]) and len(kept) < len(held)
+
+
+@pytest.mark.parametrize("every", [0, 1, 2, 3])
+def test_slow_refreshes_run_at_any_excitation_cadence(every):
+    # Slip range, excitation and covariance are refreshed every `excitation_every` fits (every fit
+    # for 0 or 1); with 0 or 1 the slip range was once computed on the first fit only (too few
+    # samples then: no extrapolation bound for the rest of the stop).
+    p = tm.LugreParams(theta=1.3)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator(LugreTROptions(excitation_every=every))
+    for s in braking(lambda t, i: curve, seed=1, duration=1.5):
+        est.update(s)
+    assert np.isfinite(est._slip_support).all()

@@ -455,21 +455,9 @@ def _limits(signal: Any) -> tuple[float, float]:
 
 
 def _clip(signal: Any, value: float) -> float:
-    """Keep a value within what the signal's bits (and DBC range) can carry."""
-    bits = signal.length
-    if signal.is_signed:
-        raw_low, raw_high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
-    else:
-        raw_low, raw_high = 0, (1 << bits) - 1
-    lo = raw_low * signal.scale + signal.offset
-    hi = raw_high * signal.scale + signal.offset
-    if signal.scale < 0:
-        lo, hi = hi, lo
-    if signal.minimum is not None and signal.maximum is not None and signal.minimum < signal.maximum:
-        lo, hi = max(lo, signal.minimum), min(hi, signal.maximum)
-    if not math.isfinite(value):
-        return lo
-    return min(max(value, lo), hi)
+    """Keep a value within what the signal's bits (and DBC range) can carry; not finite → low end."""
+    lo, hi = _limits(signal)
+    return _clamp(value, lo, hi) if math.isfinite(value) else lo
 
 
 # -------------------------------------------------------------------------------- outputs

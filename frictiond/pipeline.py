@@ -91,19 +91,9 @@ class Pipeline:
         """One received frame in; the output frames it causes (empty for most frames)."""
         stats = self.stats
         stats.frames_read += 1
-        if frame.can_id not in self._input_ids:
+        if frame.can_id not in self._input_ids or frame.is_error or frame.is_remote:
             # Most of a bus is other ECUs' traffic: counted and dropped before anything else.
-            if frame.is_error:
-                stats.error_frames += 1
-            else:
-                stats.ignored["remote frames" if frame.is_remote else
-                              "extended IDs" if frame.is_extended else "unrelated IDs"] += 1
-            return []
-        if frame.is_error:
-            stats.error_frames += 1
-            return []
-        if frame.is_remote:
-            stats.ignored["remote frames"] += 1
+            self._ignore(frame)
             return []
         try:
             decoded = self.input_codec.decode(frame)
@@ -111,7 +101,7 @@ class Pipeline:
             stats.undecodable[str(exc.reason if hasattr(exc, "reason") else exc)] += 1
             return []
         if decoded is None:   # an extended frame that shares a standard input's ID
-            stats.ignored["extended IDs" if frame.is_extended else "unrelated IDs"] += 1
+            self._ignore(frame)
             return []
         stats.input_frames += 1
         result = self.front_end.push(decoded.time_s, decoded.message, decoded.values)
@@ -119,6 +109,14 @@ class Pipeline:
             return []
         self._last_trigger_s = frame.time_s
         return self._update(frame.time_s, result)
+
+    def _ignore(self, frame: Frame) -> None:
+        """Count a frame that is not an input, by kind."""
+        if frame.is_error:
+            self.stats.error_frames += 1
+        else:
+            self.stats.ignored["remote frames" if frame.is_remote else
+                               "extended IDs" if frame.is_extended else "unrelated IDs"] += 1
 
     def tick(self, now_s: float) -> list[Frame]:
         """Call when no trigger frame has arrived for a while: reports a stale trigger input."""

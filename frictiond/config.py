@@ -229,7 +229,7 @@ def _not_a_regular_file(path: Path) -> str | None:
     except FileNotFoundError:
         return "no such file"
     except ValueError:   # a NUL byte in the path
-        return "not a usable file path"
+        return _UNUSABLE_PATH
     except OSError as exc:
         return f"cannot read: {exc.strerror or exc}"
     if stat.S_ISDIR(mode):
@@ -237,6 +237,7 @@ def _not_a_regular_file(path: Path) -> str | None:
     return None if stat.S_ISREG(mode) else "not a regular file"
 
 
+_UNUSABLE_PATH = "not a usable file path"
 _CONFIG_FILE_WORDING = {"no such file": "no such config file", "is a directory": "is a directory, not a config file",
                         "cannot read:": "cannot read config:"}
 
@@ -244,7 +245,13 @@ _CONFIG_FILE_WORDING = {"no such file": "no such config file", "is a directory":
 def _check_regular_file(key: str, path: Path) -> None:
     problem = _not_a_regular_file(path)
     if problem is not None:
-        raise ConfigError(f"{key}: {_short(path)!r}: {problem}" if "usable" in problem else f"{key}: {_short(path)}: {problem}")
+        raise ConfigError(f"{key}: {_path_text(path, problem)}: {problem}")
+
+
+def _path_text(path: Path, problem: str) -> str:
+    """The path as a message shows it: shortened, and quoted when it cannot be a file name (a
+    NUL byte would otherwise end up raw in the message)."""
+    return repr(_short(path)) if problem == _UNUSABLE_PATH else _short(path)
 
 
 def _short(path: Path) -> str:
@@ -337,7 +344,7 @@ def load_config(path: Path | str) -> Config:
     path = Path(path)
     problem = _not_a_regular_file(path)
     if problem is not None:
-        name = repr(str(path)) if "usable" in problem else _short(path)
+        name = _path_text(path, problem)
         for generic, specific in _CONFIG_FILE_WORDING.items():
             problem = problem.replace(generic, specific)
         raise ConfigError(f"{name}: {problem}")

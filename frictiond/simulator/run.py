@@ -48,7 +48,7 @@ def simulate(
 
     seq_dyn, seq_sensor, seq_bus = np.random.SeedSequence(seed).spawn(3)
     # The car as it is (loaded), against the configured one the estimator is given.
-    true_vehicle = dataclasses.replace(veh, mass=veh.mass * scn.load_factor) if scn.load_factor != 1.0 else veh
+    true_vehicle = dataclasses.replace(veh, mass=veh.mass * scn.load_factor)
     trace = run_dynamics(scn, true_vehicle, family, np.random.default_rng(seq_dyn))
     sensors = SensorModel(trace, np.random.default_rng(seq_sensor), scn.noise_scale)
     events = generate_events(

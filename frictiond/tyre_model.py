@@ -232,8 +232,8 @@ _FINE = np.linspace(-1.0, 1.0, 21)
 def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarray, np.ndarray]:
     """(μ_max, λ*) at one vehicle speed for each θ in `thetas` (other parameters from `p`).
 
-    `near` (previous λ* per θ) skips the coarse search when the peak is still inside a ±25 %
-    bracket around it — the usual case for a recursive caller whose fit moves a little per update.
+    `near` (previous λ* per θ) skips the coarse search when the peak is still bracketed by ±8 %
+    around it — the usual case for a recursive caller whose fit moves a little per update.
     """
     v = float(speed_mps)
     if near is not None:

@@ -216,6 +216,7 @@ class FrontEnd:
         self._low_since_s: list[float | None] = [None] * 4
         self._low_unbraked_s = [0.0] * 4
         self._dead = [False] * 4
+        self._torque_weights: list[float] | None = None
 
     @property
     def brake_gain_factor(self) -> float:
@@ -320,6 +321,7 @@ class FrontEnd:
         c22 = n * s2 - s1 * s1
         det = n * c00 + s1 * c01 + s2 * c02
         if not det > 1e-9 * max(n * s2 * s4, 1e-300):
+            self._torque_weights = None
             return self._fit_wheels_numpy()
         inv = 1.0 / det
         threshold = self.options.spike_threshold
@@ -341,6 +343,7 @@ class FrontEnd:
                         break
             omega.append(k0)
             omega_dot.append(k1 / h)
+        self._torque_weights = _matched_weights(times, u, (c01 * inv / h, c11 * inv / h, c12 * inv / h))
         return t_c, omega, omega_dot, glitch
 
     def _fit_wheels_numpy(self) -> tuple[float, list[float], list[float], bool]:
@@ -358,6 +361,45 @@ class FrontEnd:
         residual = speeds - design @ coef
         glitch = bool(np.max(np.abs(residual)) > self.options.spike_threshold)
         return t_c, [float(w) for w in coef[0]], [float(a) for a in coef[1]], glitch
+
+    # The wheel's angular acceleration comes from the derivative filter, which averages ω̇ over
+    # its window; the torques and the body acceleration it is set against in the wheel and body
+    # equations are averaged by the same kernel (`_matched_weights`). Against point values, a
+    # fast pressure swing (ABS on ice, where most of the brake torque goes into the wheel's
+    # inertia) left the two out of step: μ read 50 % low while the pressure rose, then as much high.
+    def _matched_brake_torques(self, pressures: list[float]) -> list[float]:
+        veh = self.vehicle
+        if self._torque_weights is None:
+            return [veh.brake_torque_nm(i, p) for i, p in enumerate(pressures)]
+        plans: dict = {}
+        pushout = veh.brake_pushout_pressure
+        return [veh.brake_gain(i) * self._matched(name, p, plans, pushout)
+                for i, (name, p) in enumerate(zip(PRESSURE_NAMES, pressures))]
+
+    def _matched_value(self, name: str, fallback: float) -> float:
+        return fallback if self._torque_weights is None else self._matched(name, fallback, {}, None)
+
+    def _matched(self, name: str, fallback: float, plans: dict, floor: float | None) -> float:
+        """Σ w_k·x(t_k) over the derivative window's times, x interpolated in its series like
+        `value_at` (`max(0, x − floor)` per series value when `floor` is given). The
+        interpolation plan depends only on the series' timestamps: signals of one message share it."""
+        history = self._source.get(name)
+        pair = history.series.get(name) if history is not None else None
+        if pair is None:
+            return fallback if floor is None else max(0.0, fallback - floor)
+        ts, vs = pair
+        key = (len(ts), ts[0], ts[-1])
+        plan = plans.get(key)
+        if plan is None:
+            plan = plans[key] = _interpolation_plan(list(ts), list(self._wheel_times), self._torque_weights)
+        if floor is None:
+            return sum(a * vs[j] for j, a in plan)
+        total = 0.0
+        for j, a in plan:
+            v = vs[j]
+            if v > floor:
+                total += a * (v - floor)
+        return total
 
     def _value(self, name: str, time_s: float) -> float | None:
         history = self._source.get(name)
@@ -428,10 +470,12 @@ class FrontEnd:
             yaw_rate = accel_lat / speed if speed > opts.min_speed else 0.0
 
         loads = veh.normal_forces(accel_long, accel_lat)
-        brake_torques = [veh.brake_torque_nm(i, p) for i, p in enumerate(pressures)]  # type: ignore[arg-type]
+        brake_torques = self._matched_brake_torques(pressures)
         inertia_torques = [veh.wheel_inertia * float(a) for a in omega_dot]
         if opts.brake_gain_correction and not glitch:
-            self._update_brake_gain(accel_long, speed, inertia_torques, brake_torques, drive)
+            # The body's deceleration through the same filter as the torques it is compared with.
+            self._update_brake_gain(self._matched_value("accel_long", accel_long_raw) - self._accel_bias_mps2,
+                                    speed, inertia_torques, brake_torques, drive)
         gain = self._brake_gain_factor
 
         slips = []
@@ -635,6 +679,47 @@ class FrontEnd:
         self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
         self._brake_model_holds = self._recent_sum_far <= 0.5 * self._recent_sum_tt
 
+
+
+def _interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:
+    """(series index, coefficient) pairs with Σ coefficient·value = Σ_k weights_k·value(times_k),
+    value interpolated linearly in the series (held beyond its ends) as `_MessageHistory.value_at`."""
+    coefficients: dict[int, float] = {}
+    get = coefficients.get
+    last = len(ts) - 1
+    k = last
+    for t, w in zip(reversed(times), reversed(weights)):
+        if t >= ts[last]:
+            coefficients[last] = get(last, 0.0) + w
+            continue
+        while k > 0 and ts[k - 1] > t:
+            k -= 1
+        if k == 0:
+            coefficients[0] = get(0, 0.0) + w
+            continue
+        t0, t1 = ts[k - 1], ts[k]
+        f = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+        coefficients[k - 1] = get(k - 1, 0.0) + w * (1.0 - f)
+        coefficients[k] = get(k, 0.0) + w * f
+    return list(coefficients.items())
+
+
+def _matched_weights(times, u, coef) -> list[float]:
+    """Weights w_k such that Σ w_k·T(t_k) is T averaged as the derivative filter averages ω̇.
+
+    The filter's derivative is Σ c_k·ω(t_k) with c_k = coef₀ + coef₁·u_k + coef₂·u_k² and Σ c_k = 0;
+    summed by parts it is Σ_j S_j·(ω(t_j) − ω(t_{j−1})) with S_j = Σ_{k≥j} c_k, i.e. the mean
+    of ω̇ over each interval weighted by S_j·Δt_j (the weights sum to 1). Each interval's mean
+    of T is taken by the trapezoid rule.
+    """
+    c = [coef[0] + coef[1] * a + coef[2] * a * a for a in u]
+    n = len(c)
+    tail = 0.0
+    interval = [0.0] * (n + 1)
+    for j in range(n - 1, 0, -1):
+        tail += c[j]
+        interval[j] = tail * (times[j] - times[j - 1])
+    return [0.5 * (interval[k] + interval[k + 1]) for k in range(n)]
 
 
 def make_front_end(

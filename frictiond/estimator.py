@@ -274,6 +274,7 @@ class LugreTrustRegionEstimator:
         self._capped: np.ndarray | None = None
         self._slip_floor = np.zeros(N_WHEELS)
         self._excited_since_s = math.inf
+        self._peak_seen = False
         self._last_update_s: float | None = None
         self._cov: np.ndarray | None = None
         self._cov_unit: np.ndarray | None = None
@@ -297,6 +298,7 @@ class LugreTrustRegionEstimator:
         self._capped = None
         self._mu_history.clear()
         self._excited_since_s = math.inf
+        self._peak_seen = False
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
@@ -461,6 +463,7 @@ class LugreTrustRegionEstimator:
             self._last_excited_s = -math.inf
             self._excitation_cache = None
             self._mu_history.clear()
+            self._peak_seen = False
 
     def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
         """Unweighted Jacobian rows and model − measurement of window samples [lo, hi) at x.
@@ -839,7 +842,16 @@ class LugreTrustRegionEstimator:
             lam_lo, lam_hi = float(ordered[k_lo]), float(ordered[k_hi])
             if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
                 # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
-                # ice): the shape of the curve near its peak is not observed.
+                # ice): the shape of the curve near its peak is not observed ...
+                mu_hi = float(np.partition(mu_meas[sel], k_hi)[k_hi])
+                if (self._peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= float(wheel_lam[i])
+                        and mu_hi >= o.min_utilisation * float(wheel_mu[i])):
+                    # ... unless this stop's data have shown the peak already and the wheel now
+                    # stays past it, using the grip the fit says is there (ABS holding a wheel
+                    # on an ice plateau): the peak is still being used, not left behind.
+                    why[i] = f"past the peak ({lam_lo / float(wheel_lam[i]):.2f})"
+                    best = max(best, 1.0)
+                    continue
                 why[i] = "no slip spread"
                 continue
             s2, s3, s4 = float(lam @ lam), float(lam @ (lam * lam)), float((lam * lam) @ (lam * lam))
@@ -890,6 +902,7 @@ class LugreTrustRegionEstimator:
             best = max(best, proximity)
         if best < o.excitation_slip_ratio:
             return 0.0
+        self._peak_seen = True
         return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
 
     def _hold(self, now_s: float, speed: float, fitted: tuple | None = None) -> FrictionEstimate:

@@ -40,8 +40,9 @@ LIMITS = {
     "snow/burckhardt": (0.008, 0.04, 0.95, 0.3, None),
     # Burckhardt ice: μ_max 0.034, already 96 % of it at 1 % slip (a plateau, ABS holds 1-2 %).
     "ice": (0.005, 0.08, 0.9, 0.3, None),
-    # The same ice at 35 m/s (μ_max 0.026): converges in ~0.7 s, short of issue 3's 0.3 s.
-    "ice_fast": (0.004, 0.08, 0.9, 0.9, None),
+    # The same ice at 35 m/s (μ_max 0.026): the ABS holds the wheels past the peak at nearly
+    # constant slip, which stays evidence of the peak once the stop has shown it.
+    "ice_fast": (0.004, 0.08, 0.95, 0.3, None),
     # A car 25 % heavier than configured: the body equation's brake-gain check absorbs it.
     "loaded": (0.025, 0.035, 0.95, 0.3, None),
     # Rough road: noisier wheel speeds and μ samples; VALID over nearly all the stop.
@@ -91,12 +92,12 @@ def test_moderate_braking_never_claims_valid(reports):
 def test_ice_magic_formula(reports):
     # Magic Formula ice: the peak at ~39 % slip, every wheel held at 26-60 %, all released
     # together; the speed observer must not take released wheels spinning back up for free
-    # rolling. The early fits (wheels locking within 0.1 s) are off by 10-25 %, so this case
+    # rolling. The early fits (wheels locking within 0.1 s) are off by 10-15 %, so this case
     # misses issue 3's 0.3 s convergence: pinned at what it achieves.
     r = reports[("ice/mf", "lugre-tr")]
     assert r.mae_rel <= 0.06, f"relative MAE {r.mae_rel:.4f}"
-    assert r.valid_share >= 0.75, f"VALID share {r.valid_share:.3f}"
-    assert r.convergence_s <= 1.5, f"convergence {r.convergence_s:.3f} s"
+    assert r.valid_share >= 0.9, f"VALID share {r.valid_share:.3f}"
+    assert r.convergence_s <= 1.2, f"convergence {r.convergence_s:.3f} s"
     assert r.false_valid_count <= 0.03 * r.valid_count, f"false VALID {r.false_valid_count}/{r.valid_count}"
 
 

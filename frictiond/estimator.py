@@ -168,12 +168,19 @@ class _Window:
         self.start = 0
         self.end = 0
         self.cached_end = 0
+        self.last_time_by_axle = [-math.inf, -math.inf]   # newest sample of a front / rear wheel
 
     def __len__(self) -> int:
         return self.end - self.start
 
     def clear(self) -> None:
         self.start = self.end = self.cached_end = 0
+        self.last_time_by_axle = [-math.inf, -math.inf]
+
+    def has_recent(self, axle: int, since_s: float) -> bool:
+        """Whether the window holds a sample of the axle (0 front, 1 rear) newer than `since_s`."""
+        t = self.last_time_by_axle[axle]
+        return t > since_s and self.end > self.start and t >= self.time[self.start]
 
     def append(self, slip: float, speed: float, mu: float, time_s: float, wheel: int) -> None:
         if self.end == self.capacity:
@@ -196,6 +203,7 @@ class _Window:
         self.stiff[k] = self.patch_length * lam / (1.0 - lam)
         self.onehot[:, k] = 0.0
         self.onehot[wheel, k] = 1.0
+        self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
         self.end += 1
 
     def drop_before(self, time_s: float) -> None:
@@ -245,6 +253,7 @@ class LugreTrustRegionEstimator:
         self._alpha = float(o.alpha)
         self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
         self._prior_peak: tuple[tuple, tuple] | None = None   # (speed, prior) → peak of the prior
+        self._params_cache: tuple[tuple, LugreParams] | None = None
         self.reset()
 
     # ------------------------------------------------------------------------------ state
@@ -420,10 +429,15 @@ class LugreTrustRegionEstimator:
         return np.exp(x[:N_WHEELS])
 
     def _params(self, x: np.ndarray) -> LugreParams:
-        sigma0, v_s, sigma2 = x[N_WHEELS:] * self._scale[N_WHEELS:]
-        return LugreParams(theta=1.0, sigma0=float(sigma0), sigma2=float(sigma2), mu_c=self._base.mu_c,
-                           mu_s=self._base.mu_s, v_s=float(v_s), alpha=self._base.alpha,
-                           patch_length=self._base.patch_length)
+        key = tuple(x[N_WHEELS:].tolist())
+        cached = self._params_cache
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        sigma0, v_s, sigma2 = (v * s for v, s in zip(key, self._shared_scale))
+        p = LugreParams(theta=1.0, sigma0=sigma0, sigma2=sigma2, mu_c=self._base.mu_c, mu_s=self._base.mu_s,
+                        v_s=v_s, alpha=self._base.alpha, patch_length=self._base.patch_length)
+        self._params_cache = (key, p)
+        return p
 
     def _weights(self, now_s: float, times: np.ndarray) -> np.ndarray:
         return np.exp(np.minimum(times - now_s, 0.0) / self.options.forgetting_time_constant)
@@ -777,8 +791,9 @@ class LugreTrustRegionEstimator:
         if last is None or o.axle_balance_time_constant <= 0:
             return
         dt = min(max(now_s - last, 0.0), 0.1)
-        recent_wheels = wheel[weights > math.exp(-1.0)]
-        if not (len(recent_wheels) and recent_wheels.min() < 2 <= recent_wheels.max()):
+        # Both axles among the samples weighted above e⁻¹ (younger than the forgetting time).
+        since = now_s - o.forgetting_time_constant
+        if not (self._window.has_recent(0, since) and self._window.has_recent(1, since)):
             return
         ratio = float(wheel_mu[0] + wheel_mu[1]) / max(float(wheel_mu[2] + wheel_mu[3]), 1e-6)
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0

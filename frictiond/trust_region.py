@@ -28,6 +28,19 @@ import numpy as np
 
 ResidualFunction = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
+try:
+    # numpy's LAPACK gufunc behind `np.linalg.eigh`, without the wrapper's checks and errstate
+    # context: half the cost on the solver's 7×7 matrices, called once per iteration. Its
+    # inputs here are finite by construction (checked below); a numpy without it gets the wrapper.
+    from numpy.linalg import _umath_linalg
+
+    def _eigh(H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return _umath_linalg.eigh_lo(H, signature="d->dd")
+
+    _eigh(np.eye(2))
+except Exception:  # pragma: no cover - depends on the numpy build
+    _eigh = np.linalg.eigh  # type: ignore[assignment]
+
 
 @dataclass(slots=True)
 class TrustRegionResult:
@@ -235,7 +248,9 @@ def solve_normal(
         d_arr = np.array(d)
         H = N * np.multiply.outer(d_arr, d_arr)
         H[diagonal] += g_dv
-        w, Q = np.linalg.eigh(H)
+        if not np.isfinite(H).all():
+            break   # (a non-finite Jacobian: nothing to step on; the caller keeps x)
+        w, Q = _eigh(H)
         eig = (w, Q, np.array(g_h) @ Q)
         iterations += 1
         theta = max(0.995, 1.0 - gh_max)

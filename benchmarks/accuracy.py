@@ -2,7 +2,8 @@
 
 Runs each scenario (and truth-model / reference-speed variants) through the full pipeline —
 frames encoded with the default DBC, decoded, front end, estimator — once per estimator, and
-prints per scenario and estimator the metrics of `frictiond.evaluation`.
+prints per scenario and estimator the metrics of `frictiond.evaluation`, then, per estimator,
+how its errors fall with the confidence it reported (every output with a confidence > 0).
 
     python benchmarks/accuracy.py [--seeds 3] [--scenarios dry,wet] [--estimators lugre-tr,burckhardt-rls]
 """
@@ -16,7 +17,7 @@ import sys
 import time
 
 from frictiond.config import default_config_path, load_config
-from frictiond.evaluation import evaluate
+from frictiond.evaluation import calibration_table, evaluate
 from frictiond.pipeline import Pipeline
 from frictiond.replay import ReplayRecorder, replay_frames
 from frictiond.sim_frames import simulate_frames
@@ -71,6 +72,7 @@ def main(argv=None) -> int:
     print("-" * len(header))
     overall: dict[str, list[float]] = {k: [] for k in kinds}
     false_valid: dict[str, list[int]] = {k: [0, 0] for k in kinds}
+    calibration: dict[str, list[tuple[float, float]]] = {k: [] for k in kinds}
     t0 = time.perf_counter()
     for label, scenario, model, ref in cases:
         for kind in kinds:
@@ -83,6 +85,7 @@ def main(argv=None) -> int:
             reconv = [r.reconvergence_s for r in reports if r.reconvergence_s is not None]
             fv = sum(r.false_valid_count for r in reports)
             nv = sum(r.valid_count for r in reports)
+            calibration[kind].extend(p for r in reports for p in r.confidence_errors)
             false_valid[kind][0] += fv
             false_valid[kind][1] += nv
             if math.isfinite(mae) and scenario != "moderate":
@@ -105,6 +108,13 @@ def main(argv=None) -> int:
     if len(kinds) == 2 and all(overall[k] for k in kinds):
         a, b = (statistics.mean(overall[k]) for k in kinds)
         print(f"ratio {kinds[0]} / {kinds[1]} mean MAE: {a / b:.3f}")
+    print()
+    for kind in kinds:
+        print(f"{kind}: |relative error| of MuMax by reported confidence")
+        for row in calibration_table(calibration[kind]):
+            print(f"  confidence {row.low:.1f}-{row.high:.1f}: n {row.count:6d}  median {100 * row.median_error:5.1f} %  "
+                  f"p90 {100 * row.p90_error:5.1f} %  >10 % off {100 * row.share_over_10:5.1f} %  "
+                  f">20 % off {100 * row.share_over_20:5.1f} %")
     print(f"({time.perf_counter() - t0:.1f} s)")
     return 0
 

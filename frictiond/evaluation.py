@@ -10,12 +10,14 @@ Definitions (shared by `benchmarks/accuracy.py` and the accuracy regression test
 - *convergence time*: from the onset until the estimate is VALID and within 10 % of the truth
   and stays so for 0.3 s;
 - *re-convergence time*: the same, measured from a jump of the true μ_max (> 10 % within 50 ms);
-- *false valid*: VALID outputs anywhere that are more than 20 % off the truth.
+- *false valid*: VALID outputs anywhere that are more than 20 % off the truth;
+- *confidence calibration*: every output with a confidence > 0, as (confidence, |relative error|),
+  for `calibration_table`: when the estimator says 0.9, the error should be small.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -40,6 +42,7 @@ class AccuracyReport:
     valid_count: int
     output_count: int
     mean_truth: float
+    confidence_errors: list[tuple[float, float]] = field(default_factory=list)
 
     @property
     def false_valid_share(self) -> float:
@@ -102,6 +105,10 @@ def evaluate(estimates: Sequence[FrictionEstimate], truth_rows: Sequence[dict[st
             reconvergence = _time_to_converge(times, mu, truth_mu, valid, jump_t)
 
     false_valid = valid & (err > FALSE_VALID_REL * np.maximum(truth_mu, 1e-3))
+    confidence = np.array([e.confidence for e in estimates], dtype=float)
+    rated = confidence > 0
+    rel_err = err / np.maximum(truth_mu, 1e-3)
+    confidence_errors = list(zip(confidence[rated].tolist(), rel_err[rated].tolist()))
     return AccuracyReport(
         mae=mae,
         mae_rel=mae_rel,
@@ -112,4 +119,34 @@ def evaluate(estimates: Sequence[FrictionEstimate], truth_rows: Sequence[dict[st
         valid_count=int(valid.sum()),
         output_count=len(estimates),
         mean_truth=float(np.mean(truth_mu[in_span])) if in_span.any() else math.nan,
+        confidence_errors=confidence_errors,
     )
+
+
+CONFIDENCE_BINS = (0.0, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0 + 1e-9)
+
+
+@dataclass
+class CalibrationRow:
+    low: float
+    high: float
+    count: int
+    median_error: float     # |relative error|
+    p90_error: float
+    share_over_10: float    # share of outputs more than 10 % off
+    share_over_20: float
+
+
+def calibration_table(pairs: Sequence[tuple[float, float]]) -> list[CalibrationRow]:
+    """(confidence, |relative error|) pairs binned by confidence (`CONFIDENCE_BINS`)."""
+    conf = np.array([c for c, _ in pairs], dtype=float)
+    err = np.array([e for _, e in pairs], dtype=float)
+    rows = []
+    for low, high in zip(CONFIDENCE_BINS[:-1], CONFIDENCE_BINS[1:]):
+        sel = err[(conf >= low) & (conf < high) & (conf > 0)]
+        if len(sel) == 0:
+            rows.append(CalibrationRow(low, min(high, 1.0), 0, math.nan, math.nan, math.nan, math.nan))
+            continue
+        rows.append(CalibrationRow(low, min(high, 1.0), len(sel), float(np.median(sel)),
+                                   float(np.quantile(sel, 0.9)), float(np.mean(sel > 0.1)), float(np.mean(sel > 0.2))))
+    return rows

@@ -12,10 +12,11 @@ import importlib.util
 import math
 import statistics
 
+import numpy as np
 import pytest
 
 from frictiond.config import default_config_path, load_config
-from frictiond.evaluation import evaluate
+from frictiond.evaluation import calibration_table, evaluate
 from frictiond.pipeline import Pipeline
 from frictiond.replay import ReplayRecorder, replay_frames
 from frictiond.sim_frames import simulate_frames
@@ -114,3 +115,16 @@ def test_false_valid_overall_and_lugre_beats_baseline(reports):
     burckhardt_cases = ["wet", "wet/ref", "snow/burckhardt", "dry/burckhardt"]
     assert statistics.mean(reports[(c, "lugre-tr")].mae for c in burckhardt_cases) < statistics.mean(
         reports[(c, "burckhardt-rls")].mae for c in burckhardt_cases)
+
+
+def test_confidence_means_something(reports):
+    """Binned by confidence, the error falls as the confidence rises: when lugre-tr says ≥ 0.8,
+    its μ_max is within a few per cent (issue 3: "when it says 0.9, the error is small")."""
+    pairs = [p for c in CASES for p in reports[(c, "lugre-tr")].confidence_errors]
+    rows = {round(r.low, 1): r for r in calibration_table(pairs)}
+    confident = [e for c, e in pairs if c >= 0.8]
+    assert len(confident) > 1000
+    assert float(np.quantile(confident, 0.9)) <= 0.06
+    assert max(confident) <= 0.2
+    # Monotone: the 0.6–0.7 bin errs more than the ≥ 0.8 ones.
+    assert rows[0.6].count > 100 and rows[0.6].p90_error > float(np.quantile(confident, 0.9))

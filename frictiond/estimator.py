@@ -128,18 +128,25 @@ class LugreTROptions:
             raise ValueError("theta_min: must be > 0")
 
 
-def _quantile(values: np.ndarray, q: float) -> float:
-    """`np.quantile(values, q)` (linear method, finite values), by one partition."""
+def _quantile_pair(values: np.ndarray, q_low: float, q_high: float) -> tuple[float, float]:
+    """`np.quantile(values, (q_low, q_high))` (linear method, finite values), by one partition."""
     n = len(values)
-    virtual = (n - 1) * q
-    i = min(int(math.floor(virtual)), n - 1)
-    if i >= n - 1:
-        return float(np.max(values))
-    part = np.partition(values, (i, i + 1))
-    a, b = float(part[i]), float(part[i + 1])
-    t = virtual - i
-    diff = b - a
-    return b - diff * (1 - t) if t >= 0.5 else a + diff * t
+    picks = []
+    for q in (q_low, q_high):
+        virtual = (n - 1) * q
+        i = min(int(math.floor(virtual)), n - 1)
+        picks.append((i, virtual - i))
+    kth = sorted({min(k, n - 1) for i, _ in picks for k in (i, i + 1)})
+    part = np.partition(values, kth)
+    out = []
+    for i, t in picks:
+        if i >= n - 1:
+            out.append(float(part[n - 1]))
+            continue
+        a, b = float(part[i]), float(part[i + 1])
+        diff = b - a
+        out.append(b - diff * (1 - t) if t >= 0.5 else a + diff * t)
+    return out[0], out[1]
 
 
 class _Window:
@@ -449,12 +456,12 @@ class LugreTrustRegionEstimator:
         offset of the newest residuals far beyond the noise.
         """
         o = self.options
-        recent = times >= now_s - o.jump_window_s
-        n_recent = int(np.count_nonzero(recent))
+        first = int(np.searchsorted(times, now_s - o.jump_window_s, side="left"))   # (times ascend)
+        n_recent = len(times) - first
         if n_recent < 8 or self._fits < 5 or len(times) - n_recent < 2 * n_recent:
             return 0.0
         # Back from weighted, normalised residuals to μ units (model − measurement).
-        resid = r_data[recent] * o.measurement_std / np.sqrt(weights[recent])
+        resid = r_data[first:] * o.measurement_std / np.sqrt(weights[first:])
         # np.mean / np.std, without their wrappers (same operations, same order).
         mean = float(resid.sum()) / n_recent
         dev = resid - mean
@@ -802,16 +809,23 @@ class LugreTrustRegionEstimator:
     def _slip_range(self, slip, wheel, weights) -> tuple[np.ndarray, np.ndarray]:
         """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
         without data gets (0, ∞): no bound on either side."""
-        o = self.options
-        recent = weights > math.exp(-o.excitation_window_s / o.forgetting_time_constant)
-        low = np.zeros(N_WHEELS)
-        high = np.full(N_WHEELS, np.inf)
+        first = self._recent_start(weights)
+        slip, wheel = slip[first:], wheel[first:]
+        low = [0.0] * N_WHEELS
+        high = [math.inf] * N_WHEELS
         for i in range(N_WHEELS):
-            sel = slip[recent & (wheel == i)]
+            sel = slip[wheel == i]
             if len(sel) >= 10:
-                low[i] = max(0.0, _quantile(sel, 0.1))
-                high[i] = _quantile(sel, 0.9)
-        return low, high
+                q_low, high[i] = _quantile_pair(sel, 0.1, 0.9)
+                low[i] = max(0.0, q_low)
+        return np.array(low), np.array(high)
+
+    def _recent_start(self, weights: np.ndarray) -> int:
+        """Index of the first window sample weighted above the excitation window's threshold
+        (the newest `excitation_window_s`); the weights rise along the window."""
+        o = self.options
+        return int(np.searchsorted(weights, math.exp(-o.excitation_window_s / o.forgetting_time_constant),
+                                   side="right"))
 
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""
@@ -833,7 +847,8 @@ class LugreTrustRegionEstimator:
         o = self.options
         # Only the newest ABS cycles count: after a change of road the older samples describe
         # the old one.
-        recent = weights > math.exp(-o.excitation_window_s / o.forgetting_time_constant)
+        first = self._recent_start(weights)
+        slip, mu_meas, wheel = slip[first:], mu_meas[first:], wheel[first:]
         best = 0.0
         why = self.excitation_reasons = ["", "", "", ""]
         fit_at_hi = self._fit_at_high_slip(speed)
@@ -844,7 +859,7 @@ class LugreTrustRegionEstimator:
             if at_bound[i]:
                 why[i] = "θ at its bound"
                 continue
-            sel = recent & (wheel == i)
+            sel = wheel == i
             n = int(np.count_nonzero(sel))
             if n < 10:
                 why[i] = "few samples"
@@ -869,8 +884,9 @@ class LugreTrustRegionEstimator:
                     continue
                 why[i] = "no slip spread"
                 continue
-            s2, s3, s4 = float(lam @ lam), float(lam @ (lam * lam)), float((lam * lam) @ (lam * lam))
-            y1, y2 = float(lam @ mu), float((lam * lam) @ mu)
+            lam2 = lam * lam
+            s2, s3, s4 = float(lam @ lam), float(lam @ lam2), float(lam2 @ lam2)
+            y1, y2 = float(lam @ mu), float(lam2 @ mu)
             det = s2 * s4 - s3 * s3
             if det <= 1e-18 * max(s2 * s4, 1e-300):
                 why[i] = "degenerate"

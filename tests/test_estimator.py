@@ -246,3 +246,13 @@ def test_slow_refreshes_run_at_any_excitation_cadence(every):
     for s in braking(lambda t, i: curve, seed=1, duration=1.5):
         est.update(s)
     assert np.isfinite(est._slip_support).all()
+
+
+def test_quantile_pair_matches_numpy():
+    from frictiond.estimator import _quantile_pair
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 10, 11, 57, 300):
+        for _ in range(20):
+            values = rng.normal(size=n)
+            low, high = _quantile_pair(values.copy(), 0.1, 0.9)
+            assert (low, high) == pytest.approx(tuple(np.quantile(values, (0.1, 0.9))), abs=1e-12)

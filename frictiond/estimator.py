@@ -21,7 +21,9 @@ Design (the choices model.md leaves open, and why):
 - Each update adds the wheels' new samples and runs at most `max_iterations` trust-region
   iterations warm-started from the last solution and trust radius (`trust_region.solve`).
 - Honesty: the peak is only identifiable once the slip has been near it. An excitation measure
-  (how close the window's slips came to λ*, and how much of μ_max was used) gates the status,
+  (how close the window's slips came to λ*, and how much of μ_max was used; the data's own μ–slip
+  curve bending over; and, for a stop's first evidence, a wheel running away into slip as tyres
+  do past their peak) gates the status,
   and the confidence comes from the Gauss–Newton covariance σ²(JᵀWJ)⁻¹ pushed onto μ_max by the
   delta method, with σ² from the residuals (model mismatch counts as noise).
 """
@@ -87,6 +89,7 @@ class LugreTROptions:
     excitation_slip_ratio: float = 0.75   # slip must have reached this fraction of λ*
     excitation_mu_ratio: float = 0.85     # ... or the utilised μ this fraction of μ_max
     excitation_min_slip: float = 0.015    # no road peaks below this slip; smaller excursions prove nothing
+    excitation_slip_rate: float = 0.3     # 1/s: a stop's first evidence of the peak needs a wheel running away
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
@@ -848,6 +851,7 @@ class LugreTrustRegionEstimator:
         # Only the newest ABS cycles count: after a change of road the older samples describe
         # the old one.
         first = self._recent_start(weights)
+        times = self._window.time[self._window.start + first:self._window.end]
         slip, mu_meas, wheel = slip[first:], mu_meas[first:], wheel[first:]
         best = 0.0
         why = self.excitation_reasons = ["", "", "", ""]
@@ -866,6 +870,16 @@ class LugreTrustRegionEstimator:
                 continue
             lam = slip[sel]
             mu = mu_meas[sel]
+            if not self._peak_seen:
+                # Over its peak a tyre gives no more force as the brake torque rises: the wheel
+                # runs away into slip (ABS exists to catch this). Steady braking, however bent its
+                # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
+                # release bends them more), moves the slip slowly.
+                t_sel = times[sel]
+                rate = (lam[2:] - lam[:-2]) / np.maximum(t_sel[2:] - t_sel[:-2], 1e-3)
+                if not float(rate.max()) >= o.excitation_slip_rate:
+                    why[i] = "slip not running away"
+                    continue
             k_hi = max(0, n - 1 - max(1, n // 10))
             k_lo = min(n - 1, max(1, n // 10))
             ordered = np.partition(lam, (k_lo, k_hi))

@@ -85,9 +85,11 @@ def test_lugre_accuracy_is_pinned(reports, label):
     assert r.false_valid_count <= 0.02 * max(r.valid_count, 1), f"false VALID {r.false_valid_count}/{r.valid_count}"
 
 
-def test_moderate_braking_never_claims_valid(reports):
-    # The peak is never approached: no VALID at all (so no wrong one).
-    assert reports[("moderate", "lugre-tr")].valid_count == 0
+@pytest.mark.parametrize("label", ["moderate", "moderate_wet", "moderate_wet/burckhardt"])
+def test_moderate_braking_never_claims_valid(reports, label):
+    # The peak is never approached (30 % of the grip on dry; 65 % on wet, where a LuGre-like
+    # tyre's curve already bends, and the driver's release bends the data more): no VALID at all.
+    assert reports[(label, "lugre-tr")].valid_count == 0
 
 
 def test_ice_magic_formula(reports):

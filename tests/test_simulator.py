@@ -30,7 +30,7 @@ SCHEDULES = [
     MessageSchedule("VEHICLE_SPEED_REF", 0.01, ("vehicle_speed_ref",)),
     MessageSchedule("WHEEL_DRIVE_TORQUE", 0.05, DRIVE),
 ]
-ABS_SCENARIOS = [n for n in SCENARIOS if n != "moderate"]
+ABS_SCENARIOS = [n for n in SCENARIOS if not n.startswith("moderate")]
 REQUIRED_TRUTH_KEYS = (
     ["time_s", "speed_mps", "mu_max", "slip_at_mu_max", "braking"]
     + [f"{k}_{w}" for k in ("slip", "mu", "mu_max", "fx", "fn", "omega_dot") for w in W]
@@ -61,7 +61,7 @@ def braking_rows(truth: Truth, settle_s: float = 0.3) -> np.ndarray:
 def test_public_api_and_scenarios():
     assert set(TRUTH_MODELS) == {"burckhardt", "magic-formula", "lugre"}
     for name in ("dry", "wet", "snow", "ice", "ice_fast", "cobblestone_wet", "dry_to_wet", "split_mu",
-                 "moderate", "cornering", "loaded", "noisy"):
+                 "moderate", "moderate_wet", "cornering", "loaded", "noisy"):
         scn = SCENARIOS[name]
         assert scn.name == name
         assert scn.description and "\n" not in scn.description
@@ -219,14 +219,17 @@ def test_peak_region_is_visited(name):
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_moderate_braking_stays_far_from_the_peak(seed):
-    tr = run("moderate", seed=seed).truth
+@pytest.mark.parametrize("name, decel_range, max_utilisation", [("moderate", (2.5, 3.5), 0.5),
+                                                                ("moderate_wet", (3.0, 4.0), 0.8)])
+def test_moderate_braking_stays_far_from_the_peak(seed, name, decel_range, max_utilisation):
+    tr = run(name, seed=seed).truth
     ratio = wheels(tr, "slip") / wheels(tr, "slip_at_mu_max")
     assert np.max(ratio) < 0.5
+    assert np.max(wheels(tr, "mu") / wheels(tr, "mu_max")) < max_utilisation
     assert not wheels(tr, "abs").any()
     b = tr["braking"] > 0.5
     decel = -tr["accel_long"][braking_rows(tr, 0.5) & b]
-    assert 2.5 < np.median(decel) < 3.5
+    assert decel_range[0] < np.median(decel) < decel_range[1]
     # released before the end: free rolling again
     assert tr["braking"][-1] == 0.0
 

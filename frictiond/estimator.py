@@ -90,6 +90,7 @@ class LugreTROptions:
     excitation_mu_ratio: float = 0.85     # ... or the utilised μ this fraction of μ_max
     excitation_min_slip: float = 0.015    # no road peaks below this slip; smaller excursions prove nothing
     excitation_slip_rate: float = 0.3     # 1/s: a stop's first evidence of the peak needs a wheel running away
+    excitation_relative_slip_rate: float = 5.0   # ... or its slip growing at this many times itself per second
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
@@ -487,7 +488,8 @@ class LugreTrustRegionEstimator:
             self._last_excited_s = -math.inf
             self._excitation_cache = None
             self._mu_history.clear()
-            self._peak_seen = False
+            # (`_peak_seen` stays: the stop is still in ABS, only on another road; a wheel held
+            # past the new fit's peak is evidence of it as much as of the old one's.)
 
     def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
         """Unweighted Jacobian rows and model − measurement of window samples [lo, hi) at x.
@@ -870,20 +872,23 @@ class LugreTrustRegionEstimator:
                 continue
             lam = slip[sel]
             mu = mu_meas[sel]
+            k_hi = max(0, n - 1 - max(1, n // 10))
+            k_lo = min(n - 1, max(1, n // 10))
+            ordered = np.partition(lam, (k_lo, k_hi))
+            lam_lo, lam_hi = float(ordered[k_lo]), float(ordered[k_hi])
             if not self._peak_seen:
                 # Over its peak a tyre gives no more force as the brake torque rises: the wheel
                 # runs away into slip (ABS exists to catch this). Steady braking, however bent its
                 # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
                 # release bends them more), moves the slip slowly.
+                # Growth over five samples (~50 ms): beyond the slip noise, within an ABS cycle.
+                # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
                 t_sel = times[sel]
-                rate = (lam[2:] - lam[:-2]) / np.maximum(t_sel[2:] - t_sel[:-2], 1e-3)
-                if not float(rate.max()) >= o.excitation_slip_rate:
+                rate = (lam[5:] - lam[:-5]) / np.maximum(t_sel[5:] - t_sel[:-5], 1e-3)
+                needed = min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi)
+                if not (len(rate) and float(rate.max()) >= needed):
                     why[i] = "slip not running away"
                     continue
-            k_hi = max(0, n - 1 - max(1, n // 10))
-            k_lo = min(n - 1, max(1, n // 10))
-            ordered = np.partition(lam, (k_lo, k_hi))
-            lam_lo, lam_hi = float(ordered[k_lo]), float(ordered[k_hi])
             if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
                 # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
                 # ice): the shape of the curve near its peak is not observed ...

@@ -1,10 +1,13 @@
 """The LuGre estimator on cases the accuracy benchmark does not have: every surface under every
-truth family at 12 and 35 m/s, a car 25 % heavier than configured, pad gains off by −15/+15 %, and
-a large SUV (2450 kg, 0.37 m wheels, its own brake gains) configured as such.
+truth family at 12 and 35 m/s, a car 25 % heavier than configured, pad gains off by −15/+15 %, a
+large SUV (2450 kg, 0.37 m wheels, its own brake gains) configured as such, and, under each truth
+family, μ jumps both ways (wet→dry, dry→ice, snow→wet), split dry|ice, a stop from 9 m/s, braking
+in a snowy curve, firm braking that stays below the peak (snow, wet) and a release and re-apply.
 
 Tuning is done on `accuracy.py`'s set; this sweep is the check that it holds elsewhere. Prints
-per case the truth, MAE, VALID share, convergence and false VALID, and marks the cases that miss
-issue 3's targets (MAE ≤ 12 %, VALID ≥ 80 %, converged within 0.3 s).
+per case the truth, MAE, VALID share, convergence, re-convergence and false VALID, and marks the
+cases that miss issue 3's targets (MAE ≤ 12 %, VALID ≥ 80 %, converged within 0.3 s, re-converged
+within 0.5 s after a jump; braking that stays below the peak: no false VALID).
 
     python benchmarks/robustness.py [--seeds 1] [--jobs 2]
 """
@@ -45,6 +48,27 @@ def cases() -> list[tuple[str, Scenario, dict]]:
                                                           brake_gain_factor=(0.85, 1.15)), {}))
     for surface, family in (("dry", "magic-formula"), ("wet", "burckhardt"), ("snow", "lugre"), ("ice", "burckhardt")):
         out.append((f"{surface}/SUV", Scenario(surface, "sweep", (surface,) * 4, family), SUV))
+    every = lambda s: (s,) * 4  # noqa: E731
+    for family in ("burckhardt", "magic-formula", "lugre"):
+        out += [(f"{label}/{family}", scenario, {}) for label, scenario in (
+            ("wet->dry", Scenario("wet->dry", "sweep", every("wet"), family, initial_speed_mps=28.0,
+                                  surfaces_after=every("dry"), surface_change_s=2.4)),
+            ("dry->ice", Scenario("dry->ice", "sweep", every("dry"), family, initial_speed_mps=28.0,
+                                  surfaces_after=every("ice"), surface_change_s=2.2)),
+            ("snow->wet", Scenario("snow->wet", "sweep", every("snow"), family, initial_speed_mps=22.0,
+                                   surfaces_after=every("wet"), surface_change_s=2.4)),
+            ("split dry|ice", Scenario("split", "sweep", ("dry", "ice", "dry", "ice"), family)),
+            ("dry 9 m/s", Scenario("dry", "sweep", every("dry"), family, initial_speed_mps=9.0)),
+            ("snow curve", Scenario("snow", "sweep", every("snow"), family, initial_speed_mps=15.0,
+                                    curve_radius_m=120.0)),
+            ("firm snow", Scenario("firm", "sweep", every("snow"), family, initial_speed_mps=20.0,
+                                   target_decel_mps2=1.2, brake_release_s=6.0, duration_s=7.5,
+                                   pedal_rate_bar_per_s=30.0)),
+            ("firm wet", Scenario("firm", "sweep", every("wet"), family, initial_speed_mps=25.0,
+                                  target_decel_mps2=3.5, brake_release_s=6.0, duration_s=7.5,
+                                  pedal_rate_bar_per_s=60.0)),
+            ("release+reapply", Scenario("reapply", "sweep", every("wet"), family, initial_speed_mps=30.0,
+                                         brake_release_s=2.5, duration_s=6.0)))]
     return out
 
 
@@ -68,15 +92,22 @@ def main(argv=None) -> int:
     jobs = [(label, scn, vehicle, seed) for label, scn, vehicle in cases() for seed in range(args.seeds)]
     with ProcessPoolExecutor(max(1, args.jobs)) as pool:
         results = list(pool.map(run, jobs))
-    print(f"{'case':26s} {'truth':>6s} {'MAE':>6s} {'MAE%':>5s} {'valid%':>6s} {'conv s':>6s} {'false VALID':>11s}")
+    print(f"{'case':28s} {'truth':>6s} {'MAE':>6s} {'MAE%':>5s} {'valid%':>6s} {'conv s':>6s} {'reconv':>6s} "
+          f"{'false VALID':>11s}")
     false_valid = valid = missed = 0
     for label, seed, r in results:
         false_valid += r.false_valid_count
         valid += r.valid_count
-        miss = not (r.mae_rel <= 0.12 and r.valid_share >= 0.8 and r.convergence_s <= 0.3)
+        if label.startswith("firm"):
+            # Below the peak (or at it only briefly): VALID is optional, a wrong one is not.
+            miss = r.false_valid_count > 0
+        else:
+            miss = not (r.mae_rel <= 0.12 and r.valid_share >= 0.8 and r.convergence_s <= 0.3
+                        and (r.reconvergence_s is None or r.reconvergence_s <= 0.5))
         missed += miss
-        print(f"{label + (f' #{seed}' if args.seeds > 1 else ''):26s} {r.mean_truth:6.3f} {r.mae:6.3f} "
-              f"{100 * r.mae_rel:5.1f} {100 * r.valid_share:6.1f} {r.convergence_s:6.2f} "
+        reconv = "" if r.reconvergence_s is None else f"{r.reconvergence_s:6.2f}"
+        print(f"{label + (f' #{seed}' if args.seeds > 1 else ''):28s} {r.mean_truth:6.3f} {r.mae:6.3f} "
+              f"{100 * r.mae_rel:5.1f} {100 * r.valid_share:6.1f} {r.convergence_s:6.2f} {reconv:>6s} "
               f"{r.false_valid_count:5d}/{r.valid_count:<5d}{'  <- misses a target' if miss else ''}")
     print(f"\nfalse VALID {false_valid}/{valid} = {100 * false_valid / max(valid, 1):.2f} %; "
           f"{missed} of {len(results)} runs miss a target ({time.perf_counter() - t0:.0f} s)")

@@ -847,7 +847,11 @@ class LugreTrustRegionEstimator:
             near μ_max), and
         (2) the data themselves bend over: a through-origin quadratic μ ≈ aλ + bλ² fitted to the
             wheel's recent samples has, at the high-slip end, a tangent slope below half its
-            secant slope — the μ–slip relation has flattened, which a linear region never does.
+            secant slope — the μ–slip relation has flattened, which a linear region never does;
+        and, until this stop has shown its peak once, (3) the wheel ran away into slip: firm
+        braking below the peak bends the data too (tyre curves bend well before their peak).
+        Once shown, a wheel held past the fitted peak at its grip stays excited (ABS holding
+        an ice plateau at nearly constant slip, where (2) has no spread to work on).
         """
         o = self.options
         # Only the newest ABS cycles count: after a change of road the older samples describe

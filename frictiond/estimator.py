@@ -96,6 +96,7 @@ class LugreTROptions:
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
     excitation_fit_ratio: float = 0.92    # ... or reach this fraction of the fitted μ_max
     peak_extrapolation: float = 1.6       # μ_max is not read beyond this multiple of the slips seen
+    extrapolation_max_slip: float = 0.3   # ... nor beyond this slip where the slips seen did not go
     min_utilisation: float = 0.8          # measured μ (90 % quantile) must reach this share of μ_max
     valid_confidence: float = 0.5
     confidence_tolerance: float = 0.06    # relative μ_max uncertainty at which confidence = e^(−½)
@@ -661,7 +662,13 @@ class LugreTrustRegionEstimator:
         # μ_max is read at that slip instead of at a "peak" near lock.
         if self._due(0) or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(slip, wheel, weights)
-        cap = self._slip_support * o.peak_extrapolation
+        support = self._slip_support
+        if not np.isfinite(support).all() and np.isfinite(support).any():
+            # A wheel without recent samples (held beyond max_slip, say) has seen no slips of its
+            # own lately: it is bounded by the slips its car-mates have seen, not left to read
+            # its peak at lock.
+            support = np.where(np.isfinite(support), support, support[np.isfinite(support)].max())
+        cap = np.minimum(support * o.peak_extrapolation, np.maximum(support, o.extrapolation_max_slip))
         beyond = wheel_lam > cap
         # The other side: data that only ever sit far past the fitted peak (a road whose μ keeps
         # creeping up to high slip, an ABS that holds the wheels there) say nothing of a hump

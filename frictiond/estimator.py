@@ -296,6 +296,7 @@ class LugreTrustRegionEstimator:
         self._slip_floor = np.zeros(N_WHEELS)
         self._excited_since_s = math.inf
         self._peak_seen = False
+        self._last_fit_s = -math.inf
         self._last_update_s: float | None = None
         self._cov: np.ndarray | None = None
         self._cov_unit: np.ndarray | None = None
@@ -403,7 +404,7 @@ class LugreTrustRegionEstimator:
             # No usable sample this cycle (wheels deep in slip, a lost frame) while the window
             # still holds this stop's data: the untrusted fit stands. Falling back to the prior
             # here made MuMax flicker between the fit and the nominal dry-road peak.
-            estimate = dataclasses.replace(last, time_s=t)
+            estimate = self._restate(last, t)
         else:
             estimate = self._hold(t, v)
         self._last_estimate = estimate
@@ -643,6 +644,7 @@ class LugreTrustRegionEstimator:
         self._x = result.x
         self._radius = max(result.radius, 1e-3)
         self._fits += 1
+        self._last_fit_s = now_s
         self._innovation_score = self._innovation(now_s, times, r_data, weights)
         estimate = self._report(now_s, speed, r_data, result.normal, weights, slip, mu_meas, speeds, wheel)
         self._detect_jump(now_s, self._innovation_score)
@@ -743,6 +745,26 @@ class LugreTrustRegionEstimator:
                                     tuple(float(m) for m in wheel_mu), mu_std, detail)
         if status == Status.VALID:
             self._last_valid = estimate
+        return estimate
+
+    def _restate(self, last: FrictionEstimate, now_s: float) -> FrictionEstimate:
+        """The last (CONVERGING) fit again, at a cycle without usable samples.
+
+        Its confidence is brought up to date when the excitation behind it is recent (within
+        `excitation_window_s` of the fit): an ABS on ice releases every wheel together for a
+        few tenths of a second, and a fit that was only waiting for the settling ramp and for
+        its own drift to die down would otherwise stay CONVERGING until the next samples.
+        """
+        o = self.options
+        excitation = self._excitation_cache or 0.0
+        if excitation <= 0.0 or now_s - self._last_fit_s > o.excitation_window_s:
+            return dataclasses.replace(last, time_s=now_s)
+        confidence = self._confidence(now_s, last.mu_max, last.mu_max_std, excitation)
+        if confidence < o.valid_confidence:
+            return dataclasses.replace(last, time_s=now_s, confidence=confidence)
+        estimate = dataclasses.replace(last, time_s=now_s, status=Status.VALID, confidence=confidence)
+        self._last_valid = estimate
+        self._last_excited_s = now_s
         return estimate
 
     def _due(self, step: int) -> bool:

@@ -256,3 +256,27 @@ def test_quantile_pair_matches_numpy():
             values = rng.normal(size=n)
             low, high = _quantile_pair(values.copy(), 0.1, 0.9)
             assert (low, high) == pytest.approx(tuple(np.quantile(values, (0.1, 0.9))), abs=1e-12)
+
+
+def test_a_settling_fit_becomes_valid_while_the_abs_releases_every_wheel():
+    """Excited, CONVERGING only until its confidence ramp has run, then a cycle-long gap with no
+    usable sample (ABS on ice releases all wheels together): the fit is restated with its
+    confidence brought up to date: VALID, with the same μ_max."""
+    p = tm.LugreParams(theta=1.6)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    last = None
+    for s in braking(lambda t, i: curve, seed=4):
+        last = est.update(s)
+        if last.status == Status.CONVERGING and last.detail.get("excitation", 0.0) > 0:
+            break
+    assert last is not None and last.status == Status.CONVERGING
+    t0, v = s.time_s, s.speed_mps
+    statuses = []
+    for k in range(1, 60):
+        gap = PhysicalSample(t0 + 0.01 * k, v, s.slip, s.mu_used, (4000.0,) * 4, (0.0,) * 4, (False,) * 4, True)
+        e = est.update(gap)
+        statuses.append((0.01 * k, e.status, e.mu_max))
+    valid = [t for t, status, _ in statuses if status == Status.VALID]
+    assert valid and valid[0] <= 0.2
+    assert all(mu == last.mu_max for _, status, mu in statuses if status == Status.VALID)

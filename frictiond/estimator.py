@@ -925,7 +925,7 @@ class LugreTrustRegionEstimator:
             if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
                 # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
                 # ice): the shape of the curve near its peak is not observed ...
-                mu_hi = float(np.partition(mu_meas[sel], k_hi)[k_hi])
+                mu_hi = float(np.partition(mu, k_hi)[k_hi])
                 if (self._peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= float(wheel_lam[i])
                         and mu_hi >= o.min_utilisation * float(wheel_mu[i])):
                     # ... unless this stop's data have shown the peak already and the wheel now

@@ -680,7 +680,6 @@ class FrontEnd:
         self._brake_model_holds = self._recent_sum_far <= 0.5 * self._recent_sum_tt
 
 
-
 def _interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:
     """(series index, coefficient) pairs with Σ coefficient·value = Σ_k weights_k·value(times_k),
     value interpolated linearly in the series (held beyond its ends) as `_MessageHistory.value_at`."""

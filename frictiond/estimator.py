@@ -99,6 +99,7 @@ class LugreTROptions:
     extrapolation_max_slip: float = 0.3   # ... nor beyond this slip where the slips seen did not go
     min_utilisation: float = 0.8          # measured μ (90 % quantile) must reach this share of μ_max
     valid_confidence: float = 0.5
+    keep_valid_confidence: float = 0.45   # a VALID estimate stays VALID down to this (no one-cycle flicker)
     confidence_tolerance: float = 0.06    # relative μ_max uncertainty at which confidence = e^(−½)
     model_mismatch: float = 0.03          # relative floor of the uncertainty (the road is not LuGre)
     drift_window_s: float = 0.15
@@ -129,6 +130,8 @@ class LugreTROptions:
             std_name = "prior_std_log_theta" if name == "theta" else f"prior_std_{name}"
             if getattr(self, std_name) <= 0:
                 raise ValueError(f"{std_name}: must be > 0")
+        if self.keep_valid_confidence > self.valid_confidence:
+            raise ValueError("keep_valid_confidence: must not exceed valid_confidence")
         if self.theta_min <= 0:
             raise ValueError("theta_min: must be > 0")
 
@@ -729,7 +732,15 @@ class LugreTrustRegionEstimator:
             detail[f"wheel_std_{i}"] = float(s)
         if excitation > 0:
             self._balance_axles(now_s, wheel_mu, weights, wheel)
-        if excitation > 0 and confidence >= o.valid_confidence:
+        # Hysteresis: an estimate that was VALID last cycle (and not since invalidated by a jump)
+        # stays VALID down to `keep_valid_confidence`. A one-cycle dip just under the threshold
+        # (the drift term reacting to a 5 % correction when an ABS cycle adds samples nearer the
+        # peak) would otherwise flip the status VALID → CONVERGING → VALID, which ABS/ESC
+        # consumers see as flicker; a real change of road drops the confidence far lower.
+        last = self._last_estimate
+        kept = last is not None and last.status == Status.VALID and self._last_valid is not None
+        threshold = o.keep_valid_confidence if kept else o.valid_confidence
+        if excitation > 0 and confidence >= threshold:
             status = Status.VALID
             self._last_excited_s = now_s
         elif excitation > 0:

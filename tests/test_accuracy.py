@@ -95,13 +95,13 @@ def test_moderate_braking_never_claims_valid(reports, label):
 def test_ice_magic_formula(reports):
     # Magic Formula ice: the peak at ~39 % slip, every wheel held at 26-60 %, all released
     # together; the speed observer must not take released wheels spinning back up for free
-    # rolling. The early fits (wheels locking within 0.1 s) are off by 7-10 %, and a 5 % step of
-    # the estimate at 0.43 s costs one CONVERGING output, so seed 0 misses issue 3's 0.3 s
-    # convergence (0.45 s; seed 1: 0.24 s): pinned at what it achieves.
+    # rolling. The early fits (wheels locking within 0.1 s) are off by 7-10 %; a 5 % step of the
+    # estimate when the second ABS cycle adds samples nearer the peak dips the confidence just
+    # under the VALID threshold, which the status hysteresis rides through (0.45 s without it).
     r = reports[("ice/mf", "lugre-tr")]
     assert r.mae_rel <= 0.06, f"relative MAE {r.mae_rel:.4f}"
     assert r.valid_share >= 0.95, f"VALID share {r.valid_share:.3f}"
-    assert r.convergence_s <= 0.6, f"convergence {r.convergence_s:.3f} s"
+    assert r.convergence_s <= 0.3, f"convergence {r.convergence_s:.3f} s"
     assert r.false_valid_count <= 0.03 * r.valid_count, f"false VALID {r.false_valid_count}/{r.valid_count}"
 
 

@@ -280,3 +280,35 @@ def test_a_settling_fit_becomes_valid_while_the_abs_releases_every_wheel():
     valid = [t for t, status, _ in statuses if status == Status.VALID]
     assert valid and valid[0] <= 0.2
     assert all(mu == last.mu_max for _, status, mu in statuses if status == Status.VALID)
+
+
+def test_valid_has_hysteresis_but_a_low_confidence_still_ends_it(monkeypatch):
+    """Once VALID, a dip of the confidence to between `keep_valid_confidence` and
+    `valid_confidence` keeps VALID (no one-cycle flicker); below it, CONVERGING; and from
+    CONVERGING the full `valid_confidence` is needed again."""
+    p = tm.LugreParams(theta=1.6)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    o = est.options
+    samples = braking(lambda t, i: curve, seed=4)
+    for s in samples:
+        if est.update(s).status == Status.VALID:
+            break
+    else:
+        pytest.fail("never VALID")
+    between = 0.5 * (o.keep_valid_confidence + o.valid_confidence)
+    script = iter([between, between, 0.5 * o.keep_valid_confidence, between, 0.9])
+    monkeypatch.setattr(est, "_confidence", lambda *args: next(script))
+    statuses = []
+    for s in samples:
+        e = est.update(s)
+        if est._last_fit_s == s.time_s:      # a fitted update (each consumed one scripted value)
+            statuses.append(e.status)
+        if len(statuses) == 5:
+            break
+    assert statuses == [Status.VALID, Status.VALID, Status.CONVERGING, Status.CONVERGING, Status.VALID]
+
+
+def test_keep_valid_confidence_cannot_exceed_valid_confidence():
+    with pytest.raises(ValueError, match="keep_valid_confidence"):
+        LugreTrustRegionEstimator(LugreTROptions(valid_confidence=0.5, keep_valid_confidence=0.6))

@@ -108,7 +108,8 @@ class LugreTROptions:
     excitation_hold_s: float = 0.15       # ... and this long while braking without excitation
     jump_threshold: float = 2.5           # change detector: newest mean residual in noise std units
     jump_window_s: float = 0.08
-    jump_refractory_s: float = 0.3        # after a detected jump, let the new road fill the window
+    jump_refractory_s: float = 0.2        # after a detected jump, let the new road fill the window
+    #   (short enough to see the rear axle cross the same change a wheelbase later)
     axle_balance_time_constant: float = 2.0   # s; 0 disables the front/rear brake-gain balance
     axle_balance_limit: float = 0.3
 

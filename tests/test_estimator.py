@@ -113,6 +113,22 @@ def test_reconverges_after_a_mu_jump():
     assert max(err for t, err in times if t > jump_t + 0.5) < 0.1
 
 
+def test_a_change_of_road_crossing_the_wheelbase_is_followed_to_the_rear_axle():
+    """The front axle reaches ice 0.12 s before the rear (a wheelbase at ~20 m/s): two jumps, the
+    second within the first's refractory time if that were longer than the crossing."""
+    dry, ice = lugre_curve(tm.LugreParams(theta=1.0)), lugre_curve(tm.LugreParams(theta=25.0))
+    front_t, rear_t = 1.5, 1.62
+    truth = tm.peak(10.0, tm.LugreParams(theta=25.0))[0]
+    est = LugreTrustRegionEstimator()
+    first_right = None
+    for s in braking(lambda t, i: ice if t >= (rear_t if i >= 2 else front_t) else dry, v0=25.0, seed=3):
+        e = est.update(s)
+        if first_right is None and s.time_s > rear_t and e.status == Status.VALID and abs(e.mu_max - truth) < 0.1 * truth:
+            first_right = s.time_s - rear_t
+    assert est._jumps == 2
+    assert first_right is not None and first_right < 0.45   # 0.56 s with a 0.3 s refractory time
+
+
 def test_state_round_trip_is_used_as_prior():
     p = tm.LugreParams(theta=2.5)
     curve = lugre_curve(p)

@@ -236,11 +236,19 @@ class LugreTrustRegionEstimator:
 
     kind = "lugre-tr"
 
-    def __init__(self, options: LugreTROptions | None = None, vehicle: VehicleParams | None = None) -> None:
+    def __init__(self, options: LugreTROptions | None = None, vehicle: VehicleParams | None = None,
+                 sample_period_s: float = 0.01) -> None:
         self.options = options or LugreTROptions()
         self.options.validate()
         self.vehicle = vehicle or VehicleParams()
         o = self.options
+        if not (math.isfinite(sample_period_s) and sample_period_s > 0):
+            raise ValueError(f"sample_period_s: must be a finite number > 0, got {sample_period_s!r}")
+        # The evidence counted in samples is set for the samples' cycle time (the wheel-speed
+        # message's): a wheel's recent slips need ~0.1 s of samples, a slip's run-away is read
+        # over ~50 ms. Counts fixed for 10 ms asked a 20 ms car for twice the time.
+        self._min_wheel_samples = max(5, round(0.1 / sample_period_s))
+        self._runaway_lag = max(2, round(0.05 / sample_period_s))
         # x: ln θ per wheel, then σ0, v_s, σ2 divided by their nominal values.
         self._scale = np.array([1.0] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, max(o.prior_sigma2, 1e-3)])
         self._lb = np.array([math.log(o.theta_min)] * N_WHEELS + [o.sigma0_min, o.v_s_min, o.sigma2_min]) / self._scale
@@ -861,7 +869,7 @@ class LugreTrustRegionEstimator:
         high = [math.inf] * N_WHEELS
         for i in range(N_WHEELS):
             sel = slip[wheel == i]
-            if len(sel) >= 10:
+            if len(sel) >= self._min_wheel_samples:
                 q_low, high[i] = _quantile_pair(sel, 0.1, 0.9)
                 low[i] = max(0.0, q_low)
         return np.array(low), np.array(high)
@@ -912,7 +920,7 @@ class LugreTrustRegionEstimator:
                 continue
             sel = wheel == i
             n = int(np.count_nonzero(sel))
-            if n < 10:
+            if n < self._min_wheel_samples:
                 why[i] = "few samples"
                 continue
             lam = slip[sel]
@@ -926,10 +934,11 @@ class LugreTrustRegionEstimator:
                 # runs away into slip (ABS exists to catch this). Steady braking, however bent its
                 # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
                 # release bends them more), moves the slip slowly.
-                # Growth over five samples (~50 ms): beyond the slip noise, within an ABS cycle.
+                # Growth over ~50 ms: beyond the slip noise, within an ABS cycle.
                 # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
                 t_sel = times[sel]
-                rate = (lam[5:] - lam[:-5]) / np.maximum(t_sel[5:] - t_sel[:-5], 1e-3)
+                lag = self._runaway_lag
+                rate = (lam[lag:] - lam[:-lag]) / np.maximum(t_sel[lag:] - t_sel[:-lag], 1e-3)
                 needed = min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi)
                 if not (len(rate) and float(rate.max()) >= needed):
                     why[i] = "slip not running away"

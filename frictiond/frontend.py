@@ -51,7 +51,10 @@ MAX_SPEED_MPS = 120.0
 class FrontEndOptions:
     """Front-end tuning; field names are the config keys under `frontend:`."""
 
-    derivative_window: int = 7            # wheel-speed samples in the local quadratic fit (odd)
+    # Wheel-speed samples in the local quadratic fit (odd); 0: as many as span
+    # `derivative_span_s` at the wheel-speed message's cycle time (7 at 10 ms, 5 at 20 ms).
+    derivative_window: int = 0
+    derivative_span_s: float = 0.06
     min_speed: float = 3.0                # m/s; below it slip is ill-conditioned
     max_slip: float = 0.6                 # samples beyond it (near lock) are not used
     min_brake_pressure: float = 1.0       # bar above push-out for a wheel to count as braked
@@ -82,10 +85,11 @@ class FrontEndOptions:
 
     def validate(self) -> None:
         """Called by the config loader: `ValueError` names the bad setting."""
-        if self.derivative_window < 3 or self.derivative_window % 2 == 0:
-            raise ValueError(f"derivative_window: must be an odd number ≥ 3, got {self.derivative_window}")
-        for name in ("min_speed", "default_period", "stale_periods", "max_gap", "spike_threshold",
-                     "accel_bias_time_constant", "brake_gain_time_constant"):
+        if self.derivative_window != 0 and (self.derivative_window < 3 or self.derivative_window % 2 == 0):
+            raise ValueError(f"derivative_window: must be 0 (from derivative_span_s) or an odd number ≥ 3, "
+                             f"got {self.derivative_window}")
+        for name in ("min_speed", "default_period", "derivative_span_s", "stale_periods", "max_gap",
+                     "spike_threshold", "accel_bias_time_constant", "brake_gain_time_constant"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.max_slip < 1:
@@ -162,8 +166,8 @@ class FrontEnd:
         message_periods: Mapping[str, float | None],
         trigger_message: str,
     ) -> None:
-        if options.derivative_window < 3 or options.derivative_window % 2 == 0:
-            raise ValueError("frontend.derivative_window must be an odd number >= 3")
+        if options.derivative_window != 0 and (options.derivative_window < 3 or options.derivative_window % 2 == 0):
+            raise ValueError("frontend.derivative_window must be 0 or an odd number >= 3")
         self.vehicle = vehicle
         self.options = options
         self.trigger_message = trigger_message
@@ -183,6 +187,14 @@ class FrontEnd:
         }
         for m in message_signals:
             self._history.setdefault(m, _MessageHistory(options.default_period))
+        # One wheel-speed sample per trigger: the per-sample constants (the derivative window,
+        # the forgetting of the brake-gain and accelerometer-offset learning) are set for the
+        # trigger's cycle time, not for 10 ms. A 7-sample window at 20 ms spans 0.12 s, over
+        # which an ABS cycle's wheel speed is no quadratic: every other sample was a "glitch".
+        self.sample_period_s = self._history[trigger_message].period_s if trigger_message in self._history \
+            else options.default_period
+        self.derivative_window = options.derivative_window or max(
+            5, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
         # Each canonical signal's history, looked up once here rather than by message per value.
         self._source = {name: self._history[m] for name, m in self._signal_message.items()}
         # Per wheel: the side of the car (−1 left) and half its axle's track.
@@ -195,7 +207,7 @@ class FrontEnd:
 
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
-        n = self.options.derivative_window
+        n = self.derivative_window
         self._wheel_times: deque[float] = deque(maxlen=n)
         self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
         self._speed_estimate_mps: float | None = None
@@ -285,7 +297,7 @@ class FrontEnd:
         self._last_trigger_s = time_s
         self._wheel_times.append(time_s)
         self._wheel_speeds.append(speeds)  # type: ignore[arg-type]
-        if len(self._wheel_times) < opts.derivative_window:
+        if len(self._wheel_times) < self.derivative_window:
             return FrontEndResult(None, stale, None)
         if stale:
             return FrontEndResult(None, stale, None)
@@ -624,7 +636,7 @@ class FrontEnd:
         # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
         # (or road grade, which the same correction absorbs).
         wheel_accel = self.vehicle.wheel_radius * (sum(omega_dot) / len(omega_dot))
-        alpha = min(1.0, self.options.default_period / max(self.options.accel_bias_time_constant, 1e-3))
+        alpha = min(1.0, self.sample_period_s / max(self.options.accel_bias_time_constant, 1e-3))
         error = accel_long_raw - wheel_accel
         if abs(error) < 2.0:
             # The plain mean of the first samples, then the exponential forgetting: right after
@@ -669,11 +681,11 @@ class FrontEnd:
         # end reports a fault.
         far = not (1.0 - lim) / _BRAKE_MODEL_MARGIN <= ratio <= (1.0 + lim) * _BRAKE_MODEL_MARGIN
         ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
-        keep = 1.0 - min(1.0, opts.default_period / max(opts.brake_gain_time_constant, 1e-3))
+        keep = 1.0 - min(1.0, self.sample_period_s / max(opts.brake_gain_time_constant, 1e-3))
         weight = total_brake * total_brake
         self._gain_sum_tt = keep * self._gain_sum_tt + weight
         self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
-        recent = 1.0 - min(1.0, opts.default_period / _BRAKE_MODEL_WINDOW_S)
+        recent = 1.0 - min(1.0, self.sample_period_s / _BRAKE_MODEL_WINDOW_S)
         self._recent_sum_tt = recent * self._recent_sum_tt + weight
         self._recent_sum_far = recent * self._recent_sum_far + (weight if far else 0.0)
         self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt

@@ -25,13 +25,13 @@ FAULT_WINDOW_S = 0.5
 DEAD_WHEEL_CONFIDENCE = 0.3
 
 
-def make_estimator(config: Config) -> Any:
-    """The estimator named by `estimator.kind`."""
+def make_estimator(config: Config, sample_period_s: float = 0.01) -> Any:
+    """The estimator named by `estimator.kind`, for samples `sample_period_s` apart."""
     kind = config.estimator.kind
     if kind == "lugre-tr":
         from .estimator import LugreTrustRegionEstimator
 
-        return LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle)
+        return LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle, sample_period_s)
     if kind == "burckhardt-rls":
         from .baseline_rls import BurckhardtRLSEstimator
 
@@ -74,7 +74,7 @@ class Pipeline:
         trigger = next(m.name for m in messages if m.frame_id == self.input_codec.trigger_id)
         self.front_end: FrontEnd = make_front_end(config.vehicle, config.frontend, messages, trigger)
         self.trigger_message = trigger
-        self.estimator = estimator if estimator is not None else make_estimator(config)
+        self.estimator = estimator if estimator is not None else make_estimator(config, self.front_end.sample_period_s)
         self.stats = PipelineStats()
         self.last_estimate: FrictionEstimate | None = None
         self.last_sample: PhysicalSample | None = None

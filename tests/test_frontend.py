@@ -306,3 +306,40 @@ def test_brake_torque_is_filtered_like_the_wheel_acceleration():
     # The pressure swing moves the torque by ±350 N·m (±1100 N at the tyre); the point torque
     # against the filtered ω̇ was off by up to 160 N here.
     assert max(abs(f - force) for f in forces) < 0.03 * force
+
+
+def feed_at(fe: FrontEnd, drive: WheelDrive, duration: float, period: float):
+    """`feed_fl` with every message at `period` (a car whose DBC sends at another cycle time)."""
+    results = []
+    for k in range(int(duration / period)):
+        t = k * period
+        w = drive.omega(t)
+        fe.push(t + 0.3 * period, "ACCEL", {"accel_long": -drive.decel, "accel_lat": 0.0, "yaw_rate": 0.0})
+        fe.push(t + 0.6 * period, "PRESS", dict(zip(PRESSURE_NAMES, (drive.fl_pressure(t),) + (drive.pressure,) * 3)))
+        r = fe.push(t + period, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, (drive.fl_omega(t, w), w, w, w))))
+        if r is not None:
+            results.append(r)
+    return results
+
+
+@pytest.mark.parametrize("period, window", [(0.01, 7), (0.02, 5), (0.005, 13)])
+def test_derivative_window_spans_the_same_time_at_any_cycle_time(period, window):
+    periods = {m: period for m in MESSAGES}
+    fe = FrontEnd(VEH, FrontEndOptions(), MESSAGES, periods, "WHEELS")
+    assert fe.derivative_window == window
+    assert FrontEnd(VEH, FrontEndOptions(derivative_window=9), MESSAGES, periods, "WHEELS").derivative_window == 9
+
+
+def test_abs_cycles_at_a_20_ms_cycle_time_are_not_glitches():
+    """A wheel-speed swing of an ABS cycle (8 rad/s at 6 Hz) sampled every 20 ms: over 7 samples
+    (0.12 s) it is no quadratic, and every such window was flagged a glitch (the sample lost,
+    the status FAULT); over the same 60 ms as at 10 ms it is."""
+    def fl_omega(t, w):
+        return w - 8.0 * (1.0 + math.sin(2 * math.pi * 6.0 * t))
+
+    periods = {m: 0.02 for m in MESSAGES}
+    drive = WheelDrive(fl_omega, lambda t: 60.0, v0=25.0, decel=6.0, slip=0.05)
+    auto = feed_at(FrontEnd(VEH, FrontEndOptions(), MESSAGES, periods, "WHEELS"), drive, 2.0, 0.02)
+    assert len(auto) > 80 and not any(r.fault == "wheel speed glitch" for r in auto)
+    fixed = feed_at(FrontEnd(VEH, FrontEndOptions(derivative_window=7), MESSAGES, periods, "WHEELS"), drive, 2.0, 0.02)
+    assert sum(r.fault == "wheel speed glitch" for r in fixed) > 10

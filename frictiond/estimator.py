@@ -91,6 +91,7 @@ class LugreTROptions:
     excitation_min_slip: float = 0.015    # no road peaks below this slip; smaller excursions prove nothing
     excitation_slip_rate: float = 0.3     # 1/s: a stop's first evidence of the peak needs a wheel running away
     excitation_relative_slip_rate: float = 5.0   # ... or its slip growing at this many times itself per second
+    excitation_runaway_elasticity: float = 0.3   # ... while μ grows by at most this share of the slip's relative growth
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
@@ -897,8 +898,9 @@ class LugreTrustRegionEstimator:
         (2) the data themselves bend over: a through-origin quadratic μ ≈ aλ + bλ² fitted to the
             wheel's recent samples has, at the high-slip end, a tangent slope below half its
             secant slope — the μ–slip relation has flattened, which a linear region never does;
-        and, until this stop has shown its peak once, (3) the wheel ran away into slip: firm
-        braking below the peak bends the data too (tyre curves bend well before their peak).
+        and, until this stop has shown its peak once, (3) the wheel ran away into slip, its
+        force no longer following: firm braking below the peak bends the data too (tyre curves
+        bend well before their peak).
         Once shown, a wheel held past the fitted peak at its grip stays excited (ABS holding
         an ice plateau at nearly constant slip, where (2) has no spread to work on).
         """
@@ -939,6 +941,12 @@ class LugreTrustRegionEstimator:
                 t_sel = times[sel]
                 lag = self._runaway_lag
                 rate = (lam[lag:] - lam[:-lag]) / np.maximum(t_sel[lag:] - t_sel[:-lag], 1e-3)
+                # ... and the force no longer following it: Δμ/μ ≤ elasticity·Δλ/λ. The pedal
+                # applied briskly moves the slip as fast in the linear region (0.3 /s at 65 % of
+                # the grip on wet), but there μ rises in proportion.
+                follows = (mu[lag:] - mu[:-lag]) * lam[:-lag] > (
+                    o.excitation_runaway_elasticity * (lam[lag:] - lam[:-lag]) * mu[:-lag])
+                rate[follows] = 0.0
                 needed = min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi)
                 if not (len(rate) and float(rate.max()) >= needed):
                     why[i] = "slip not running away"

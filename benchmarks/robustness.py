@@ -1,6 +1,8 @@
 """The LuGre estimator on cases the accuracy benchmark does not have: every surface under every
 truth family at 12 and 35 m/s, a car 25 % heavier than configured, pad gains off by −15/+15 %, a
-large SUV (2450 kg, 0.37 m wheels, its own brake gains) configured as such, and, under each truth
+large SUV (2450 kg, 0.37 m wheels, its own brake gains) and a city car (1080 kg, 0.285 m wheels,
+weak rear brakes with a push-out pressure), each configured as such, inputs every 20 ms and
+every 5 ms (another car's DBC), and, under each truth
 family, μ jumps both ways (wet→dry, dry→ice, snow→wet), split dry|ice, a stop from 9 m/s, braking
 in a snowy curve, firm braking that stays below the peak (snow, wet) and a release and re-apply.
 
@@ -16,11 +18,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import itertools
+import os
+import re
 import sys
+import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
-from frictiond.config import default_config_path, load_config
+from frictiond.config import default_config_path, load_config, package_data_path
 from frictiond.evaluation import evaluate
 from frictiond.pipeline import Pipeline
 from frictiond.replay import ReplayRecorder, replay_frames
@@ -33,6 +39,10 @@ from frictiond.simulator.scenarios import Scenario
 SUV = dict(mass=2450.0, cg_to_front_axle=1.35, cg_to_rear_axle=1.65, cg_height=0.72, track_front=1.68,
            track_rear=1.70, wheel_radius=0.37, wheel_inertia=2.1, brake_gain_front=38.0, brake_gain_rear=20.0,
            drag_area_coefficient=0.55)
+# A city car: light, short, small wheels, weak rear brakes with a push-out pressure.
+CITY_CAR = dict(mass=1080.0, cg_to_front_axle=0.98, cg_to_rear_axle=1.52, cg_height=0.52, track_front=1.42,
+                track_rear=1.40, wheel_radius=0.285, wheel_inertia=0.75, brake_gain_front=17.0, brake_gain_rear=7.0,
+                brake_pushout_pressure=0.5, drag_area_coefficient=0.62)
 
 
 def cases() -> list[tuple[str, Scenario, dict]]:
@@ -48,6 +58,14 @@ def cases() -> list[tuple[str, Scenario, dict]]:
                                                           brake_gain_factor=(0.85, 1.15)), {}))
     for surface, family in (("dry", "magic-formula"), ("wet", "burckhardt"), ("snow", "lugre"), ("ice", "burckhardt")):
         out.append((f"{surface}/SUV", Scenario(surface, "sweep", (surface,) * 4, family), SUV))
+    for surface, family in (("dry", "burckhardt"), ("wet", "magic-formula"), ("snow", "burckhardt"), ("ice", "magic-formula")):
+        out.append((f"{surface}/city car", Scenario(surface, "sweep", (surface,) * 4, family, initial_speed_mps=20.0),
+                    CITY_CAR))
+    # Inputs at other cycle times than the default DBC's 10 ms (another car's DBC).
+    for cycle_ms in (20, 5):
+        for surface, family in (("dry", "burckhardt"), ("wet", "magic-formula"), ("snow", "lugre"), ("ice", "burckhardt")):
+            out.append((f"{surface}/{family}/every {cycle_ms} ms", Scenario(surface, "sweep", (surface,) * 4, family),
+                        {"_cycle_ms": cycle_ms}))
     every = lambda s: (s,) * 4  # noqa: E731
     for family in ("burckhardt", "magic-formula", "lugre"):
         out += [(f"{label}/{family}", scenario, {}) for label, scenario in (
@@ -72,10 +90,26 @@ def cases() -> list[tuple[str, Scenario, dict]]:
     return out
 
 
+def _dbc_at(cycle_ms: int) -> Path:
+    """The default DBC with every input message's cycle time set to `cycle_ms`."""
+    text = package_data_path("frictiond.dbc").read_text()
+    text = re.sub(r'(BA_ "GenMsgCycleTime" BO_ (?:176|192|208|224|240)) \d+;', rf"\1 {cycle_ms};", text)
+    path = Path(tempfile.gettempdir()) / f"frictiond-robustness-{cycle_ms}ms.dbc"
+    if not path.exists() or path.read_text() != text:
+        scratch = path.with_suffix(f".{os.getpid()}")
+        scratch.write_text(text)
+        os.replace(scratch, path)     # (atomic: the other worker may be writing the same file)
+    return path
+
+
 def run(job: tuple[str, Scenario, dict, int]):
     label, scenario, vehicle, seed = job
     config = load_config(default_config_path())
+    vehicle = dict(vehicle)
+    cycle_ms = vehicle.pop("_cycle_ms", None)
     config = dataclasses.replace(config, vehicle=dataclasses.replace(config.vehicle, **vehicle))
+    if cycle_ms is not None:
+        config = dataclasses.replace(config, can=dataclasses.replace(config.can, dbc=(_dbc_at(cycle_ms),)))
     codec = input_codec_for(config)
     result = simulate(scenario, config.vehicle, schedules_for(codec), seed=seed)
     recorder = ReplayRecorder()

@@ -817,7 +817,23 @@ class LugreTrustRegionEstimator:
             return 0.0
         if self._excited_since_s == math.inf or now_s < self._excited_since_s:
             self._excited_since_s = now_s
-        reference = next((m for t, m in history if t >= now_s - o.drift_window_s), mu_max)
+        # The reference is the median of the fits around `drift_window_s` ago (± a sixth of it),
+        # not the single oldest one: a fit that dipped for a cycle (an ABS release, 6 % on MF
+        # ice) would otherwise cost the confidence twice, when it happens and again a drift
+        # window later as the reference, making a settled estimate CONVERGING for a cycle.
+        since = now_s - o.drift_window_s * (7.0 / 6.0)
+        values: list[float] = []
+        until = math.inf
+        for t, m in history:     # (ascending times)
+            if t < since:
+                continue
+            if not values:
+                until = t + o.drift_window_s / 3.0
+            elif t > until:
+                break
+            values.append(m)
+        values.sort()
+        reference = values[len(values) // 2]   # (never empty: this fit was just appended)
         scale = max(mu_max, 0.05)
         drift = abs(mu_max - reference) / scale
         rel_std = mu_std / scale if math.isfinite(mu_std) else 10.0

@@ -328,3 +328,22 @@ def test_valid_has_hysteresis_but_a_low_confidence_still_ends_it(monkeypatch):
 def test_keep_valid_confidence_cannot_exceed_valid_confidence():
     with pytest.raises(ValueError, match="keep_valid_confidence"):
         LugreTrustRegionEstimator(LugreTROptions(valid_confidence=0.5, keep_valid_confidence=0.6))
+
+
+def test_a_one_cycle_dip_of_the_fit_is_not_counted_again_a_drift_window_later():
+    """The drift term compares μ_max with the fits of `drift_window_s` ago: a fit that dipped 6 %
+    for one cycle (an ABS release) lowers the confidence then, but not again when it becomes the
+    oldest fit in the window (the median of the fits around then is the reference)."""
+    est = LugreTrustRegionEstimator()
+    o = est.options
+    est._excited_since_s = 0.0
+    dip_t = 0.3
+    confidence = {}
+    for k in range(80):
+        t = round(0.01 * k, 2)
+        mu = 0.094 if t == dip_t else 0.1
+        confidence[t] = est._confidence(t, mu, 0.001, 1.0)
+    settled = confidence[0.79]
+    assert confidence[dip_t] < 0.7 * settled            # the dip itself is not trusted
+    later = round(dip_t + o.drift_window_s, 2)
+    assert min(confidence[round(later + d, 2)] for d in (-0.02, -0.01, 0.0, 0.01, 0.02)) > 0.95 * settled

@@ -7,6 +7,7 @@ expansion is bounded, so no input can execute code or blow up memory.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import stat
 import types
@@ -181,7 +182,15 @@ def _build_section(cls: type, data: Any, prefix: str, base: Path, ranges: Mappin
     for key, value in data.items():
         full = f"{prefix}.{key}"
         if not isinstance(key, str) or key not in names:
-            raise ConfigError(f"{full}: unknown setting (known: {', '.join(sorted(names))})")
+            close = difflib.get_close_matches(str(key), names, n=3, cutoff=0.6)
+            known = ", ".join(sorted(names))
+            if close:
+                hint = f"did you mean {' or '.join(close)}?"
+            elif len(known) <= 600:
+                hint = f"known: {known}"
+            else:   # (a list of fifty settings would bury the message)
+                hint = f"{len(names)} settings, the fields of {cls.__module__}.{cls.__qualname__}"
+            raise ConfigError(f"{full}: unknown setting ({hint})")
         tp = hints[key]
         if dataclasses.is_dataclass(tp):
             kwargs[key] = _build_section(tp, value, full, base)

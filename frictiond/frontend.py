@@ -44,6 +44,7 @@ _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brak
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
 _BRAKE_MODEL_WINDOW_S = 0.2                 # ... in most of the braking of about this long
 MAX_PRESSURE_BAR = 350.0
+MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 MAX_SPEED_MPS = 120.0
 
 
@@ -191,8 +192,10 @@ class FrontEnd:
         # the forgetting of the brake-gain and accelerometer-offset learning) are set for the
         # trigger's cycle time, not for 10 ms. A 7-sample window at 20 ms spans 0.12 s, over
         # which an ABS cycle's wheel speed is no quadratic: every other sample was a "glitch".
-        self.sample_period_s = self._history[trigger_message].period_s if trigger_message in self._history \
-            else options.default_period
+        # (Not below 4 ms: the daemon's flood guard passes at most 250 updates/s by default, and a
+        # DBC claiming 1 ms would otherwise size a 61-sample window for frames that come slower.)
+        self.sample_period_s = max(MIN_SAMPLE_PERIOD_S, self._history[trigger_message].period_s
+                                   if trigger_message in self._history else options.default_period)
         self.derivative_window = options.derivative_window or max(
             5, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
         # Each canonical signal's history, looked up once here rather than by message per value.

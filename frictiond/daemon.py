@@ -164,6 +164,7 @@ class Daemon:
         self._stop = threading.Event()
         self._reload_requested = False
         self.running = threading.Event()   # set once READY=1 was sent (tests wait on it)
+        self._period_warned = False
         self.state_file: StateFile | None = None
         self.estimate_log: EstimateLog | None = None
         self._last_rx_time: float | None = None
@@ -357,6 +358,13 @@ class Daemon:
         return ", ".join(parts)
 
     def _update_status(self, now: float) -> None:
+        fe = self.pipeline.front_end
+        if not self._period_warned and fe.period_mismatch():
+            self._period_warned = True
+            log.warning("%s arrives every %.1f ms but its DBC cycle time is %.1f ms: the derivative filter "
+                        "and the staleness limits are sized from the DBC; fix its GenMsgCycleTime",
+                        fe.trigger_message, 1e3 * (fe.measured_period_s or 0.0),
+                        1e3 * fe.period_of(fe.trigger_message))
         dt = now - self._status_at
         if dt > 0:
             self._fps = (self.stats.rx_frames - self._status_rx) / dt
@@ -404,6 +412,7 @@ class Daemon:
         self.save_state()
         self.config = new
         self.pipeline = pipeline
+        self._period_warned = False
         self._set_rates()
         self._updates_saved = 0
         if new.daemon.state_file != old.daemon.state_file:

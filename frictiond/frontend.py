@@ -232,6 +232,20 @@ class FrontEnd:
         self._low_unbraked_s = [0.0] * 4
         self._dead = [False] * 4
         self._torque_weights: list[float] | None = None
+        self._trigger_period_s = 0.0
+        self._triggers_timed = 0
+
+    @property
+    def measured_period_s(self) -> float | None:
+        """The wheel-speed message's mean cycle time as it arrives (None before 100 frames)."""
+        return self._trigger_period_s if self._triggers_timed >= 100 else None
+
+    def period_mismatch(self) -> bool:
+        """Whether the wheel speeds arrive at a rate far from the DBC's cycle time (the derivative
+        window, the staleness limits and the estimator's counts are sized from the latter)."""
+        measured = self.measured_period_s
+        nominal = self._history[self.trigger_message].period_s if self.trigger_message in self._history else None
+        return measured is not None and nominal is not None and not 0.6 * nominal <= measured <= 1.6 * nominal
 
     @property
     def brake_gain_factor(self) -> float:
@@ -292,6 +306,11 @@ class FrontEnd:
             self._repeats[i] = self._repeats[i] + 1 if w == self._previous_speeds[i] and w > 1.0 else 0
         self._previous_speeds = speeds
         dt = time_s - self._last_trigger_s
+        if 0.0 < dt <= opts.max_gap:
+            # The trigger's actual cycle time (a slow mean: lost frames barely move it), set
+            # against the DBC's, which the per-sample constants were sized for.
+            self._triggers_timed += 1
+            self._trigger_period_s += (dt - self._trigger_period_s) / min(self._triggers_timed, 100)
         if dt <= 0.0 or dt > opts.max_gap:
             # A gap or a jump back in time: the derivative window must not straddle it.
             self._wheel_times.clear()

@@ -39,11 +39,11 @@ class ReplaySummary:
     trigger_period_s: float
     counter_jumps: int = 0            # alive-counter jumps on input messages (lost/repeated frames)
     repeated_triggers: int = 0        # wheel-speed frames the front end skipped (repeats, reordering)
+    measured_trigger_period_s: float | None = None   # as the wheel-speed frames arrived
 
     def status_seconds(self) -> dict[str, float]:
-        return {
-            Status(s).name: n * self.trigger_period_s for s, n in sorted(self.stats.status_updates.items())
-        }
+        period = self.measured_trigger_period_s or self.trigger_period_s
+        return {Status(s).name: n * period for s, n in sorted(self.stats.status_updates.items())}
 
     def format(self, truth_path: str | None = None) -> str:
         s = self.stats
@@ -62,6 +62,11 @@ class ReplaySummary:
             f"frames written    {s.frames_out}",
             "time in status    " + ", ".join(f"{k} {v:.2f} s" for k, v in self.status_seconds().items()),
         ]
+        measured = self.measured_trigger_period_s
+        if measured is not None and not 0.6 * self.trigger_period_s <= measured <= 1.6 * self.trigger_period_s:
+            lines.append(f"cycle time        wheel speeds every {1e3 * measured:.1f} ms, the DBC says "
+                         f"{1e3 * self.trigger_period_s:.1f} ms: fix its GenMsgCycleTime (the derivative filter, "
+                         "staleness limits and sample counts are sized from it)")
         if s.faults:
             lines.append("faults            " + "; ".join(f"{k}: {v}" for k, v in s.faults.most_common(5)))
         f = self.final
@@ -102,6 +107,7 @@ def replay_frames(
     return ReplaySummary(
         pipeline.stats, first, last, pipeline.last_estimate, pipeline.front_end.period_of(pipeline.trigger_message),
         pipeline.input_codec.counter_jumps, pipeline.front_end.skipped_triggers,
+        pipeline.front_end.measured_period_s,
     )
 
 

@@ -168,3 +168,16 @@ def test_random_garbage_on_every_id_never_crashes(seed):
     assert summary.stats.frames_read == len(garbage)
     assert not any(e.status == Status.VALID for e in recorder.estimates)
     assert "undecodable" in summary.format()
+
+
+@pytest.mark.parametrize("period_s", [0.025, 0.01])
+def test_replay_summary_names_a_cycle_time_the_dbc_gets_wrong(default_config, period_s):
+    from .vcan.synth import braking_frames
+
+    frames = list(braking_frames(default_config, duration_s=3.0, period_s=period_s))
+    summary = replay_frames(Pipeline(default_config), frames)
+    assert summary.measured_trigger_period_s == pytest.approx(period_s, rel=0.02)
+    text = summary.format()
+    assert ("every 25.0 ms, the DBC says 10.0 ms" in text) == (period_s == 0.025)
+    # time in status counts the frames as they came
+    assert sum(summary.status_seconds().values()) == pytest.approx(summary.stats.updates * period_s, rel=0.02)

@@ -627,3 +627,23 @@ print(s.final.status.name)
     if proc.stdout.strip() == "no-mdwe":
         pytest.skip("kernel without PR_SET_MDWE")
     assert proc.stdout.strip() == "VALID"
+
+
+@pytest.mark.parametrize("period_s, warned", [(0.025, True), (0.01, False)])
+def test_wheel_speeds_at_another_rate_than_the_dbc_says_is_logged(default_config, caplog, period_s, warned):
+    """The DBC's cycle time sizes the derivative filter, the staleness limits and the estimator's
+    counts: a car sending its wheel speeds at another rate gets one warning naming both."""
+    caplog.set_level("WARNING")
+    frames = list(braking_frames(default_config, duration_s=3.0, period_s=period_s))
+    with Running(default_config) as run:
+        run.feed(frames)
+        assert run.wait_for(lambda: run.daemon.stats.rx_frames == len(frames))
+        end = time.monotonic() + 2.5      # (the status, and this check, run once a second)
+        while time.monotonic() < end and not any("cycle time" in r.message for r in caplog.records):
+            time.sleep(0.05)
+        run.stop()
+    found = [r.message for r in caplog.records if "cycle time" in r.message]
+    if warned:
+        assert len(found) == 1 and "every 25.0 ms" in found[0] and "is 10.0 ms" in found[0], found
+    else:
+        assert not found

@@ -343,3 +343,16 @@ def test_abs_cycles_at_a_20_ms_cycle_time_are_not_glitches():
     assert len(auto) > 80 and not any(r.fault == "wheel speed glitch" for r in auto)
     fixed = feed_at(FrontEnd(VEH, FrontEndOptions(derivative_window=7), MESSAGES, periods, "WHEELS"), drive, 2.0, 0.02)
     assert sum(r.fault == "wheel speed glitch" for r in fixed) > 10
+
+
+def test_a_trigger_arriving_at_another_rate_than_its_dbc_cycle_time_is_noticed():
+    drive = WheelDrive(lambda t, w: w, lambda t: 60.0, v0=25.0, decel=3.0, slip=0.03)
+    declared_10ms = FrontEnd(VEH, FrontEndOptions(), MESSAGES, {m: 0.01 for m in MESSAGES}, "WHEELS")
+    feed_at(declared_10ms, drive, 1.0, 0.02)     # 50 frames: too few to judge
+    assert declared_10ms.measured_period_s is None and not declared_10ms.period_mismatch()
+    feed_at(declared_10ms, drive, 3.0, 0.02)
+    assert declared_10ms.measured_period_s == pytest.approx(0.02, rel=0.05)
+    assert declared_10ms.period_mismatch()
+    right = FrontEnd(VEH, FrontEndOptions(), MESSAGES, {m: 0.02 for m in MESSAGES}, "WHEELS")
+    feed_at(right, drive, 4.0, 0.02)
+    assert right.measured_period_s == pytest.approx(0.02, rel=0.05) and not right.period_mismatch()

@@ -364,7 +364,7 @@ class Daemon:
             log.warning("%s arrives every %.1f ms but its DBC cycle time is %.1f ms: the derivative filter "
                         "and the staleness limits are sized from the DBC; fix its GenMsgCycleTime",
                         fe.trigger_message, 1e3 * (fe.measured_period_s or 0.0),
-                        1e3 * fe.period_of(fe.trigger_message))
+                        1e3 * fe.declared_period_s)
         dt = now - self._status_at
         if dt > 0:
             self._fps = (self.stats.rx_frames - self._status_rx) / dt

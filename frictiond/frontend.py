@@ -167,8 +167,7 @@ class FrontEnd:
         message_periods: Mapping[str, float | None],
         trigger_message: str,
     ) -> None:
-        if options.derivative_window != 0 and (options.derivative_window < 3 or options.derivative_window % 2 == 0):
-            raise ValueError("frontend.derivative_window must be 0 or an odd number >= 3")
+        options.validate()
         self.vehicle = vehicle
         self.options = options
         self.trigger_message = trigger_message
@@ -194,8 +193,9 @@ class FrontEnd:
         # which an ABS cycle's wheel speed is no quadratic: every other sample was a "glitch".
         # (Not below 4 ms: the daemon's flood guard passes at most 250 updates/s by default, and a
         # DBC claiming 1 ms would otherwise size a 61-sample window for frames that come slower.)
-        self.sample_period_s = max(MIN_SAMPLE_PERIOD_S, self._history[trigger_message].period_s
-                                   if trigger_message in self._history else options.default_period)
+        self.declared_period_s = (self._history[trigger_message].period_s if trigger_message in self._history
+                                  else options.default_period)
+        self.sample_period_s = max(MIN_SAMPLE_PERIOD_S, self.declared_period_s)
         self.derivative_window = options.derivative_window or max(
             5, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
         # Each canonical signal's history, looked up once here rather than by message per value.
@@ -244,8 +244,8 @@ class FrontEnd:
         """Whether the wheel speeds arrive at a rate far from the DBC's cycle time (the derivative
         window, the staleness limits and the estimator's counts are sized from the latter)."""
         measured = self.measured_period_s
-        nominal = self._history[self.trigger_message].period_s if self.trigger_message in self._history else None
-        return measured is not None and nominal is not None and not 0.6 * nominal <= measured <= 1.6 * nominal
+        nominal = self.declared_period_s
+        return measured is not None and not 0.6 * nominal <= measured <= 1.6 * nominal
 
     @property
     def brake_gain_factor(self) -> float:

@@ -1,10 +1,12 @@
 """Estimator update cost against scipy's least_squares(method="trf") refitting the same window.
 
 For every update of the LuGre estimator during simulated ABS stops:
-  - the estimator's own update (bounded: at most `max_iterations` trust-region iterations);
+  - the estimator's own update (bounded: at most `max_iterations` trust-region iterations),
+    with its compiled fit (frictiond._fitcore) and, in lockstep on the same samples, with the
+    numpy path that is the fallback where no C compiler was available at install;
   - from the same warm start (the parameters before the update), on the same window, weights
-    and bounds, to the same tolerances: frictiond.trust_region.solve run to convergence, and
-    scipy.optimize.least_squares(method="trf", jac=analytic) — with |Δμ_max| between the two.
+    and bounds, to the same tolerances: the compiled fit and frictiond.trust_region.solve run to
+    convergence, and scipy.optimize.least_squares(method="trf", jac=analytic) — with |Δμ_max|.
 
     python benchmarks/estimator_update.py [--limit N]
 """
@@ -23,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import braking_samples, percentile, summary_us  # noqa: E402
 
 from frictiond import trust_region  # noqa: E402
-from frictiond.estimator import LugreTrustRegionEstimator  # noqa: E402
+from frictiond.estimator import LugreTrustRegionEstimator, compiled_fit  # noqa: E402
 from frictiond.tyre_model import peaks  # noqa: E402
 
 TOL = dict(ftol=1e-8, xtol=1e-8, gtol=1e-8)
@@ -34,15 +36,25 @@ def main(argv=None) -> int:
     parser.add_argument("--limit", type=int, default=400, help="refit comparisons (default 400)")
     args = parser.parse_args(argv)
     config, samples = braking_samples()
+    if compiled_fit is None:
+        print("frictiond._fitcore is not built (no C compiler at install?): the compiled figures are missing")
     est = LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle)
-    update_times, ours_full, scipy_full, mu_diff, upd_diff, fits = [], [], [], [], [], 0
+    numpy_est = LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle)
+    numpy_est.core = None
+    update_times, numpy_times, ours_full, core_full, scipy_full, mu_diff, core_diff, upd_diff, fits = (
+        [], [], [], [], [], [], [], [], 0)
+    path_diff = 0.0
     compared_updates = []  # the estimator's own update on exactly the fits that were refitted
     for sample in samples:
         x_before = est._x.copy()
         fits_before = est._fits
         t0 = time.perf_counter()
-        est.update(sample)
+        estimate = est.update(sample)
         update_times.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        numpy_estimate = numpy_est.update(sample)
+        numpy_times.append(time.perf_counter() - t0)
+        path_diff = max(path_diff, abs(estimate.mu_max - numpy_estimate.mu_max))
         if est._fits == fits_before or fits >= args.limit:
             continue
         fits += 1
@@ -58,6 +70,16 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         mine = trust_region.solve(fun, x_before, est._lb, est._ub, max_iterations=200, **TOL)
         ours_full.append(time.perf_counter() - t0)
+        if compiled_fit is not None:
+            w = est._window
+            lo, hi = w.start, w.end
+            x_core = x_before.copy()
+            t0 = time.perf_counter()
+            compiled_fit.solve(w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw,
+                               x_core, est._lb, est._ub, est._prior, est._inv_prior_std, est._tie_rel_d, np.empty(7),
+                               np.empty((7, 7)), np.empty(hi - lo), np.empty(hi - lo), est._core_constants,
+                               float("nan"), 200, TOL["ftol"], TOL["xtol"], TOL["gtol"], 0.0, 60)
+            core_full.append(time.perf_counter() - t0)
         start = np.clip(x_before, est._lb + 1e-10, est._ub - 1e-10)
         t0 = time.perf_counter()
         ref = least_squares(lambda x: fun(x)[0], start, jac=lambda x: fun(x)[1], bounds=(est._lb, est._ub),
@@ -67,12 +89,23 @@ def main(argv=None) -> int:
         mu_a = peaks(v, est._params(mine.x), est._thetas(mine.x))[0]
         mu_b = peaks(v, est._params(ref.x), est._thetas(ref.x))[0]
         mu_diff.append(float(np.max(np.abs(mu_a - mu_b))))
+        if compiled_fit is not None:
+            mu_c = peaks(v, est._params(x_core), est._thetas(x_core))[0]
+            core_diff.append(float(np.max(np.abs(mu_c - mu_b))))
         mu_u = peaks(v, est._params(est._x), est._thetas(est._x))[0]   # the bounded update's own fit
         upd_diff.append(float(np.max(np.abs(mu_u - mu_b))))
-    braking_updates = [t for t in update_times if t > 20e-6]
+    fitting = [k for k, t in enumerate(numpy_times) if t > 20e-6]   # (held updates take a few µs)
+    braking_updates = [update_times[k] for k in fitting]
+    numpy_fitting = [numpy_times[k] for k in fitting]
     print(f"samples {len(samples)}, fits compared {fits}")
     print(f"estimator update (all)          {summary_us(update_times)}")
     print(f"estimator update (fitting)      {summary_us(braking_updates)}")
+    print(f"  numpy path (fitting)          {summary_us(numpy_fitting)}")
+    print(f"  ratio numpy path / compiled fit (median): "
+          f"{statistics.median(numpy_fitting) / statistics.median(braking_updates):.2f}x; "
+          f"max |Δμ_max| between the two paths {path_diff:.1e}")
+    if core_full:
+        print(f"compiled fit to tolerance       {summary_us(core_full)}")
     print(f"trust_region.solve to tolerance {summary_us(ours_full)}")
     print(f"least_squares(trf) refit        {summary_us(scipy_full)}")
     ratio_update = statistics.median(scipy_full) / statistics.median(braking_updates)
@@ -84,6 +117,12 @@ def main(argv=None) -> int:
     print(f"ratio least_squares / estimator update, same updates (median): {ratio_same:6.1f}x   "
           f"p99: {percentile(scipy_full, 99) / percentile(compared_updates, 99):6.1f}x")
     print(f"ratio least_squares / trust_region.solve, same tolerance (median): {ratio_solver:6.1f}x")
+    if core_full:
+        print(f"ratio least_squares / compiled fit, same tolerance (median): "
+              f"{statistics.median(scipy_full) / statistics.median(core_full):6.1f}x   "
+              f"p99: {percentile(scipy_full, 99) / percentile(core_full, 99):6.1f}x")
+        print(f"|Δμ_max| compiled fit vs least_squares: median {statistics.median(core_diff):.2e}  "
+              f"max {max(core_diff):.2e}")
     print(f"|Δμ_max| solve vs least_squares: median {statistics.median(mu_diff):.2e}  max {max(mu_diff):.2e}")
     print(f"|Δμ_max| estimator update (≤ max_iterations) vs least_squares: median {statistics.median(upd_diff):.2e}  "
           f"p99 {percentile(upd_diff, 99):.2e}  max {max(upd_diff):.2e}")

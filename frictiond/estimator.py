@@ -38,6 +38,13 @@ from typing import Any
 import numpy as np
 
 from . import trust_region
+
+try:
+    # The per-update fit compiled (setup.py builds it when a C compiler is there); without it,
+    # the same fit runs on the numpy path below (`_normal` + `trust_region.solve_normal`).
+    from . import _fitcore as compiled_fit
+except ImportError:  # pragma: no cover - depends on the install
+    compiled_fit = None
 from .samples import FrictionEstimate, PhysicalSample, Status
 from .tyre_model import (_SMALL_Z, MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials,
                          braking_mu_and_partials_few, mu_and_jacobian_theta, peaks)
@@ -279,6 +286,9 @@ class LugreTrustRegionEstimator:
         self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
         self._prior_peak: tuple[tuple, tuple] | None = None   # (speed, prior) → peak of the prior
         self._params_cache: tuple[tuple, LugreParams] | None = None
+        self._core_constants = (float(o.mu_c), float(o.mu_s - o.mu_c), self._alpha) + self._shared_scale
+        # The compiled fit when installed; `None` runs the numpy path (tests, benchmarks compare).
+        self.core = compiled_fit
         self.reset()
 
     # ------------------------------------------------------------------------------ state
@@ -641,6 +651,39 @@ class LugreTrustRegionEstimator:
         slip, speeds, mu_meas, times, wheel = self._window.view()
         weights = self._weights(now_s, times)
         sw = np.sqrt(weights) * (1.0 / o.measurement_std)
+        if self.core is not None:
+            normal, r_data = self._solve_compiled(sw)
+        else:
+            normal, r_data = self._solve_numpy(sw)
+        self._fits += 1
+        self._last_fit_s = now_s
+        self._innovation_score = self._innovation(now_s, times, r_data, weights)
+        estimate = self._report(now_s, speed, r_data, normal, weights, slip, mu_meas, speeds, wheel)
+        self._detect_jump(now_s, self._innovation_score)
+        return estimate
+
+    def _solve_compiled(self, sw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The update's trust-region iterations in C; JᵀJ and the weighted residuals at the result."""
+        o = self.options
+        w = self._window
+        lo, hi = w.start, w.end
+        x = self._x.copy()
+        n = len(x)
+        gradient, normal = np.empty(n), np.empty((n, n))
+        r_data, r_work = np.empty(hi - lo), np.empty(hi - lo)
+        _, radius, _, _, _ = self.core.solve(
+            w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, x, self._lb,
+            self._ub, self._prior, self._inv_prior_std, self._tie_rel_d, gradient, normal, r_data, r_work,
+            self._core_constants, math.nan if self._radius is None else self._radius, o.max_iterations, o.ftol,
+            o.xtol, 1e-8, o.predicted_ftol, 4)
+        self._cache_x = None   # (the numpy path's row cache is not kept up here)
+        self._x = x
+        self._radius = max(radius, 1e-3)
+        return normal, r_data
+
+    def _solve_numpy(self, sw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`_solve_compiled` on the numpy path: `_normal` driven by `trust_region.solve_normal`."""
+        o = self.options
 
         def fun(x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, tuple]:
             return self._normal(x, sw)
@@ -656,12 +699,7 @@ class LugreTrustRegionEstimator:
         self._cache_x = x_at
         self._x = result.x
         self._radius = max(result.radius, 1e-3)
-        self._fits += 1
-        self._last_fit_s = now_s
-        self._innovation_score = self._innovation(now_s, times, r_data, weights)
-        estimate = self._report(now_s, speed, r_data, result.normal, weights, slip, mu_meas, speeds, wheel)
-        self._detect_jump(now_s, self._innovation_score)
-        return estimate
+        return result.normal, r_data
 
     def _report(self, now_s: float, speed: float, r_data: np.ndarray, normal: np.ndarray, weights: np.ndarray,
                 slip: np.ndarray, mu_meas: np.ndarray, speeds: np.ndarray, wheel: np.ndarray) -> FrictionEstimate:

@@ -16,6 +16,13 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+try:
+    # The peak search and the partials at a handful of points, compiled with the estimator's
+    # fit (setup.py); the float code below is the fallback and the reference (tests compare).
+    from . import _fitcore as _compiled
+except ImportError:  # pragma: no cover - depends on the install
+    _compiled = None
+
 # Slip is kept away from 1 (locked wheel: Z → ∞) so every formula stays finite.
 MAX_MODEL_SLIP = 0.98
 # Below this Z the closed form of F loses digits to cancellation; use the series instead.
@@ -193,13 +200,18 @@ def braking_mu_and_partials_few(lam, v: float, theta, p: LugreParams) -> tuple[n
     Returns μ (k,) and the partials (k, 4); for the few points of a peak this is much cheaper
     than the array path.
     """
+    lams = np.asarray(lam, dtype=float).ravel().tolist()
+    thetas = np.asarray(theta, dtype=float).ravel().tolist()
+    if _compiled is not None and len(lams) == len(thetas) <= 16:
+        mus, flat = _compiled.mu_partials_few(lams, float(v), thetas, (
+            p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.sigma0 * p.patch_length, p.v_s, p.sigma2))
+        return np.array(mus), np.array(flat).reshape(-1, 4)
     exp, expm1 = math.exp, math.expm1
     mu_c, dmu, alpha, sigma0, v_s, sigma2 = p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.v_s, p.sigma2
     k = sigma0 * p.patch_length
     inv_v_s, inv_sigma0, c_v_s = 1.0 / v_s, 1.0 / sigma0, alpha / v_s
     mus, rows = [], []
-    for lam_i, theta_i in zip(np.asarray(lam, dtype=float).ravel().tolist(),
-                              np.asarray(theta, dtype=float).ravel().tolist()):
+    for lam_i, theta_i in zip(lams, thetas):
         lam_i = min(lam_i, MAX_MODEL_SLIP)
         lam_v = lam_i * v
         ratio = (lam_v * inv_v_s) ** alpha if lam_v >= 0 else math.nan
@@ -274,11 +286,14 @@ def _peaks_near(v: float, p: LugreParams, thetas, near) -> tuple[np.ndarray, np.
     if not (v_ratio > 0 and math.isfinite(v_ratio)):
         return None
     mus, lams = [], []
-    try:
-        pairs = list(zip(np.asarray(thetas, dtype=float).ravel().tolist(),
-                         np.asarray(near, dtype=float).ravel().tolist(), strict=True))
-    except ValueError:
+    theta_list = np.asarray(thetas, dtype=float).ravel().tolist()
+    near_list = np.asarray(near, dtype=float).ravel().tolist()
+    if len(theta_list) != len(near_list):
         return None
+    if _compiled is not None and len(theta_list) <= 16:
+        found = _compiled.peaks_near(v, theta_list, near_list, (mu_c, dmu, alpha, theta_k, p.v_s, p.sigma2))
+        return None if found is None else (np.array(found[0]), np.array(found[1]))
+    pairs = list(zip(theta_list, near_list))
     for theta, lam in pairs:
         # Parabolic steps through three points around the previous peak; each must find the
         # middle point highest (the peak bracketed). A recursive fit moves its peak a little per

@@ -5,8 +5,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # user-mode-linux gives a real vcan0 on kernels without SocketCAN; can-utils is the outside peer;
-# systemd provides systemd-analyze for the unit-file checks; tmux drives the monitor in a real terminal.
-DEB_PACKAGES=(python3-venv user-mode-linux can-utils kmod iproute2 systemd tmux)
+# systemd provides systemd-analyze for the unit-file checks; tmux drives the monitor in a real terminal;
+# gcc and the Python headers build the compiled fit (frictiond/_fitcore.c).
+DEB_PACKAGES=(python3-venv gcc libc6-dev python3-dev user-mode-linux can-utils kmod iproute2 systemd tmux)
 if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     missing=()
     for pkg in "${DEB_PACKAGES[@]}"; do

@@ -1,0 +1,687 @@
+/*
+ * frictiond._fitcore: the estimator's per-update numerics, compiled.
+ *
+ * The same computation as `LugreTrustRegionEstimator._normal` (static LuGre rows of the
+ * window, weighted, plus the priors and the wheel ties, as normal equations) driven by the
+ * same iterations as `trust_region.solve_normal` (Coleman-Li scaled trust region, exact
+ * subproblem by eigen-decomposition and Newton on the secular equation, projected steps).
+ * In Python those are a few hundred small numpy calls per update; here they are a few
+ * microseconds. The Python path stays the reference and the fallback where no compiler was
+ * available at install (tests compare the two).
+ *
+ * Arrays arrive through the buffer protocol (C-contiguous float64, the wheel index as intp),
+ * so building needs no numpy headers. Pure numerics: nothing of CAN.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+#define NW 4            /* wheels: one ln θ each */
+#define NP 7            /* parameters: 4 ln θ, σ0, v_s, σ2 (scaled) */
+#define NT 4            /* soft ties between the wheels' ln θ */
+#define SMALL_Z 1e-4    /* below this, F(Z) by its series (tyre_model._SMALL_Z) */
+
+typedef struct {
+    Py_ssize_t m;
+    const double *pow_lam_v, *stiff, *lam_v, *mu, *sw;
+    const Py_ssize_t *wheel;
+    const double *prior, *inv_prior_std, *tie;      /* tie: NT x NW, rows (e_a - e_b)/rel */
+    double mu_c, dmu, alpha, sc4, sc5, sc6;
+} Problem;
+
+/* 1/2 |r|^2, J^T r, J^T J at x; the weighted data residuals into r_data. Returns 0, or -1
+ * for a non-finite model (the caller treats it like numpy's NaN). */
+static void evaluate(const Problem *p, const double *x, double *cost, double *g, double *N, double *r_data)
+{
+    double thetas[NW], inv_t[NW], Zk[NW];
+    const double sigma0 = x[4] * p->sc4, v_s = x[5] * p->sc5, sigma2 = x[6] * p->sc6;
+    const double v_pow = pow(v_s, -p->alpha);
+    const double k4 = p->sc4 / sigma0, k5 = p->dmu * p->alpha / v_s * p->sc5;
+    /* Accumulators: per wheel the θ-entries with themselves and the shared ones; the
+     * shared 3x3 block; the gradient and cost. */
+    double tt[NW] = {0}, ts[NW][3], ss[3][3], gt_[NW] = {0}, gs[3] = {0}, rr = 0.0;
+    memset(ts, 0, sizeof ts);
+    memset(ss, 0, sizeof ss);
+    for (int i = 0; i < NW; i++) {
+        thetas[i] = exp(x[i]);
+        inv_t[i] = 1.0 / thetas[i];
+        Zk[i] = thetas[i] * sigma0;
+    }
+    for (Py_ssize_t j = 0; j < p->m; j++) {
+        const int wi = (int)p->wheel[j];
+        const double ratio = p->pow_lam_v[j] * v_pow;
+        const double e = exp(-ratio);
+        const double gg = e * p->dmu + p->mu_c;
+        const double Z = Zk[wi] * p->stiff[j] / gg;
+        double F, ZdF;
+        if (Z < SMALL_Z) {
+            F = Z / 2.0 - Z * Z / 6.0;
+            ZdF = Z * (0.5 - Z / 3.0);
+        } else {
+            const double om = -expm1(-Z), iz = 1.0 / Z;
+            F = 1.0 - om * iz;
+            ZdF = (om * (1.0 + Z) - Z) * iz;
+        }
+        const double FmZ = F - ZdF, gt = gg * inv_t[wi], lv = p->lam_v[j], w = p->sw[j];
+        const double a = -(gt * FmZ) * w;
+        const double s0 = gt * ZdF * k4 * w;
+        const double s1 = FmZ * inv_t[wi] * e * ratio * k5 * w;
+        const double s2 = lv * p->sc6 * w;
+        const double r = (gt * F + sigma2 * lv - p->mu[j]) * w;
+        r_data[j] = r;
+        tt[wi] += a * a;
+        ts[wi][0] += a * s0;
+        ts[wi][1] += a * s1;
+        ts[wi][2] += a * s2;
+        ss[0][0] += s0 * s0;
+        ss[0][1] += s0 * s1;
+        ss[0][2] += s0 * s2;
+        ss[1][1] += s1 * s1;
+        ss[1][2] += s1 * s2;
+        ss[2][2] += s2 * s2;
+        gt_[wi] += a * r;
+        gs[0] += s0 * r;
+        gs[1] += s1 * r;
+        gs[2] += s2 * r;
+        rr += r * r;
+    }
+    memset(N, 0, NP * NP * sizeof(double));
+    for (int i = 0; i < NW; i++) {
+        N[i * NP + i] = tt[i];
+        for (int k = 0; k < 3; k++)
+            N[i * NP + NW + k] = N[(NW + k) * NP + i] = ts[i][k];
+        g[i] = gt_[i];
+    }
+    for (int a = 0; a < 3; a++) {
+        for (int b = a; b < 3; b++)
+            N[(NW + a) * NP + NW + b] = N[(NW + b) * NP + NW + a] = ss[a][b];
+        g[NW + a] = gs[a];
+    }
+    /* Priors: rows (x - prior)/std. */
+    for (int i = 0; i < NP; i++) {
+        const double q = p->inv_prior_std[i], d = (x[i] - p->prior[i]) * q;
+        N[i * NP + i] += q * q;
+        g[i] += q * d;
+        rr += d * d;
+    }
+    /* Ties: rows T x[:NW]. */
+    for (int t = 0; t < NT; t++) {
+        const double *row = p->tie + t * NW;
+        double d = 0.0;
+        for (int i = 0; i < NW; i++)
+            d += row[i] * x[i];
+        for (int i = 0; i < NW; i++) {
+            g[i] += row[i] * d;
+            for (int k = 0; k < NW; k++)
+                N[i * NP + k] += row[i] * row[k];
+        }
+        rr += d * d;
+    }
+    *cost = 0.5 * rr;
+}
+
+/* Symmetric eigen-decomposition of an NP x NP matrix by cyclic Jacobi rotations:
+ * eigenvalues ascending in w, eigenvectors in the columns of Q. */
+static void eigh(const double *H, double *w, double *Q)
+{
+    double A[NP][NP], V[NP][NP];
+    for (int i = 0; i < NP; i++)
+        for (int k = 0; k < NP; k++) {
+            A[i][k] = H[i * NP + k];
+            V[i][k] = (i == k);
+        }
+    for (int sweep = 0; sweep < 60; sweep++) {
+        double off = 0.0, diag = 0.0;
+        for (int i = 0; i < NP; i++) {
+            diag += A[i][i] * A[i][i];
+            for (int k = i + 1; k < NP; k++)
+                off += A[i][k] * A[i][k];
+        }
+        if (off <= 1e-32 * diag || off == 0.0)
+            break;
+        for (int pp = 0; pp < NP - 1; pp++)
+            for (int q = pp + 1; q < NP; q++) {
+                const double apq = A[pp][q];
+                if (apq == 0.0)
+                    continue;
+                const double tau = (A[q][q] - A[pp][pp]) / (2.0 * apq);
+                const double t = (tau >= 0 ? 1.0 : -1.0) / (fabs(tau) + sqrt(1.0 + tau * tau));
+                const double c = 1.0 / sqrt(1.0 + t * t), s = t * c;
+                for (int k = 0; k < NP; k++) {
+                    const double akp = A[k][pp], akq = A[k][q];
+                    A[k][pp] = c * akp - s * akq;
+                    A[k][q] = s * akp + c * akq;
+                }
+                for (int k = 0; k < NP; k++) {
+                    const double apk = A[pp][k], aqk = A[q][k];
+                    A[pp][k] = c * apk - s * aqk;
+                    A[q][k] = s * apk + c * aqk;
+                }
+                for (int k = 0; k < NP; k++) {
+                    const double vkp = V[k][pp], vkq = V[k][q];
+                    V[k][pp] = c * vkp - s * vkq;
+                    V[k][q] = s * vkp + c * vkq;
+                }
+            }
+    }
+    int order[NP];
+    for (int i = 0; i < NP; i++)
+        order[i] = i;
+    for (int i = 1; i < NP; i++) {      /* insertion sort by eigenvalue */
+        const int o = order[i];
+        int k = i - 1;
+        while (k >= 0 && A[order[k]][order[k]] > A[o][o]) {
+            order[k + 1] = order[k];
+            k--;
+        }
+        order[k + 1] = o;
+    }
+    for (int c = 0; c < NP; c++) {
+        w[c] = A[order[c]][order[c]];
+        for (int r = 0; r < NP; r++)
+            Q[r * NP + c] = V[r][order[c]];
+    }
+}
+
+/* argmin 1/2 s^T H s + g^T s over |s| <= radius, from H = Q diag(w) Q^T and a = Q^T g
+ * (trust_region._subproblem). */
+static void subproblem(const double *w, const double *Q, const double *a, double radius, double *s)
+{
+    double c[NP];
+    const double w0 = w[0], w_last = w[NP - 1];
+    int interior = 0;
+    if (w0 > 1e-12 * fmax(1.0, fabs(w_last))) {
+        double ss = 0.0;
+        for (int i = 0; i < NP; i++) {
+            c[i] = a[i] / w[i];
+            ss += c[i] * c[i];
+        }
+        interior = ss <= radius * radius;
+    }
+    if (!interior) {
+        const double lam_low = fmax(0.0, -w0) + 1e-14 * fmax(1.0, fabs(w_last));
+        double norm_a = 0.0;
+        for (int i = 0; i < NP; i++)
+            norm_a += a[i] * a[i];
+        norm_a = sqrt(norm_a);
+        double lam = fmax(lam_low, norm_a / radius - w0);
+        for (int it = 0; it < 50; it++) {
+            double ss = 0.0, s3 = 0.0;
+            int bad = 0;
+            for (int i = 0; i < NP; i++) {
+                const double den = w[i] + lam;
+                if (den == 0.0) {
+                    bad = 1;
+                    break;
+                }
+                const double inv = 1.0 / den, si = a[i] * inv;
+                ss += si * si;
+                s3 += si * si * inv;
+            }
+            if (bad)
+                break;
+            const double ns = sqrt(ss);
+            if (ns == 0.0)
+                break;
+            const double phi = 1.0 / radius - 1.0 / ns;
+            if (fabs(phi) * radius < 1e-6)
+                break;
+            const double dns = -s3 / ns;
+            const double step = phi / (dns / (ns * ns));
+            if (!isfinite(step))
+                break;
+            lam = fmax(lam - step, lam_low);
+        }
+        for (int i = 0; i < NP; i++)
+            c[i] = a[i] / (w[i] + lam);
+    }
+    for (int r = 0; r < NP; r++) {
+        double v = 0.0;
+        for (int k = 0; k < NP; k++)
+            v += Q[r * NP + k] * c[k];
+        s[r] = -v;
+    }
+}
+
+static double norm(const double *v)
+{
+    double s = 0.0;
+    for (int i = 0; i < NP; i++)
+        s += v[i] * v[i];
+    return sqrt(s);
+}
+
+typedef struct {
+    double cost, radius;
+    int iterations, converged, evaluations;
+} Outcome;
+
+/* trust_region.solve_normal on `evaluate`: x in/out; g, N, r_data at the returned x. */
+static Outcome solve(const Problem *p, double *x, const double *lb, const double *ub, double radius,
+                     int max_iterations, double ftol, double xtol, double gtol, int max_rejections,
+                     double predicted_ftol, double *g, double *N, double *r_data, double *r_trial)
+{
+    double inner_lb[NP], inner_ub[NP];
+    int fin_lb[NP], fin_ub[NP];
+    for (int i = 0; i < NP; i++) {
+        fin_lb[i] = isfinite(lb[i]);
+        fin_ub[i] = isfinite(ub[i]);
+        const double span = isfinite(ub[i] - lb[i]) ? ub[i] - lb[i] : 1.0;
+        inner_lb[i] = lb[i] + 1e-10 * span;
+        inner_ub[i] = ub[i] - 1e-10 * span;
+        x[i] = fmin(fmax(fmin(fmax(x[i], lb[i]), ub[i]), inner_lb[i]), inner_ub[i]);
+    }
+    Outcome out = {0.0, radius, 0, 0, 1};
+    double cost;
+    evaluate(p, x, &cost, g, N, r_data);
+    if (!isfinite(radius) || radius <= 0) {
+        double s = 0.0;
+        for (int i = 0; i < NP; i++) {
+            double v = 1.0;
+            if (g[i] > 0 && fin_lb[i])
+                v = x[i] - lb[i];
+            else if (g[i] < 0 && fin_ub[i])
+                v = ub[i] - x[i];
+            s += x[i] * x[i] / v;
+        }
+        radius = sqrt(s);
+        if (radius == 0.0)
+            radius = 1.0;
+    }
+    double g_new[NP], N_new[NP * NP], x_new[NP];
+    double *r_cur = r_data, *r_try = r_trial;
+    while (out.iterations < max_iterations) {
+        double d[NP], g_h[NP], g_dv[NP], gv_max = 0.0, gh_max = 0.0;
+        int has_nan = 0;
+        for (int i = 0; i < NP; i++) {
+            double vi;
+            g_dv[i] = 0.0;
+            if (g[i] > 0 && fin_lb[i]) {
+                vi = x[i] - lb[i];
+                g_dv[i] = g[i];
+            } else if (g[i] < 0 && fin_ub[i]) {
+                vi = ub[i] - x[i];
+                g_dv[i] = -g[i];
+            } else
+                vi = 1.0;
+            const double gv = fabs(g[i] * vi);
+            has_nan = has_nan || gv != gv;
+            gv_max = gv > gv_max ? gv : gv_max;
+            d[i] = vi > 0 ? sqrt(vi) : 0.0;
+            g_h[i] = d[i] * g[i];
+            gh_max = fabs(g_h[i]) > gh_max ? fabs(g_h[i]) : gh_max;
+        }
+        if (!has_nan && gv_max < gtol) {
+            out.converged = 1;
+            break;
+        }
+        double H[NP * NP], w[NP], Q[NP * NP], a[NP];
+        int finite = 1;
+        for (int i = 0; i < NP; i++)
+            for (int k = 0; k < NP; k++) {
+                H[i * NP + k] = N[i * NP + k] * d[i] * d[k] + (i == k ? g_dv[i] : 0.0);
+                finite = finite && isfinite(H[i * NP + k]);
+            }
+        if (!finite)
+            break;
+        eigh(H, w, Q);
+        for (int k = 0; k < NP; k++) {
+            a[k] = 0.0;
+            for (int i = 0; i < NP; i++)
+                a[k] += g_h[i] * Q[i * NP + k];
+        }
+        out.iterations++;
+        const double theta = fmax(0.995, 1.0 - gh_max);
+        double upper_room[NP], lower_room[NP];
+        for (int i = 0; i < NP; i++) {
+            upper_room[i] = theta * (ub[i] - x[i]);
+            lower_room[i] = theta * (lb[i] - x[i]);
+        }
+        double cost_new = cost, actual = 0.0, s[NP], s_h[NP];
+        int accepted = 0;
+        for (int attempt = 0; attempt < max_rejections; attempt++) {
+            subproblem(w, Q, a, radius, s_h);
+            int outside = 0;
+            for (int i = 0; i < NP; i++) {
+                s[i] = d[i] * s_h[i];
+                outside = outside || s[i] > upper_room[i] || s[i] < lower_room[i];
+            }
+            if (outside)
+                for (int i = 0; i < NP; i++) {
+                    s[i] = fmin(fmax(s[i], lower_room[i]), upper_room[i]);
+                    s_h[i] = s[i] / d[i];
+                }
+            double gs = 0.0, sHs = 0.0;
+            for (int i = 0; i < NP; i++) {
+                gs += g_h[i] * s_h[i];
+                double hs = 0.0;
+                for (int k = 0; k < NP; k++)
+                    hs += H[i * NP + k] * s_h[k];
+                sHs += s_h[i] * hs;
+            }
+            const double predicted = -(gs + 0.5 * sHs);
+            if (predicted_ftol > 0 && predicted < predicted_ftol * cost) {
+                out.converged = 1;
+                goto done;
+            }
+            for (int i = 0; i < NP; i++)
+                x_new[i] = fmin(fmax(x[i] + s[i], inner_lb[i]), inner_ub[i]);
+            evaluate(p, x_new, &cost_new, g_new, N_new, r_try);
+            out.evaluations++;
+            actual = cost - cost_new;
+            const double step_norm = norm(s_h);
+            const double ratio = predicted > 0 ? actual / predicted : -1.0;
+            if (ratio < 0.25)
+                radius = step_norm > 0 ? 0.25 * step_norm : 0.25 * radius;
+            else if (ratio > 0.75 && step_norm >= 0.95 * radius)
+                radius *= 2.0;
+            if (actual > 0 && isfinite(cost_new)) {
+                accepted = 1;
+                break;
+            }
+            if (radius < 1e-12 * (1.0 + norm(x))) {
+                out.converged = 1;
+                goto done;
+            }
+        }
+        if (!accepted) {
+            out.converged = 1;
+            goto done;
+        }
+        const double x_norm = norm(x);
+        memcpy(x, x_new, sizeof x_new);
+        memcpy(g, g_new, sizeof g_new);
+        memcpy(N, N_new, sizeof N_new);
+        double *tmp = r_cur;
+        r_cur = r_try;
+        r_try = tmp;
+        const int small_cost = actual < ftol * cost;
+        const int small_step = norm(s) < xtol * (xtol + x_norm);
+        cost = cost_new;
+        if (small_cost || small_step) {
+            out.converged = 1;
+            break;
+        }
+    }
+done:
+    if (r_cur != r_data)
+        memcpy(r_data, r_cur, p->m * sizeof(double));
+    out.cost = cost;
+    out.radius = radius;
+    return out;
+}
+
+/* ---------------------------------------------------------------------- Python binding */
+
+typedef struct {
+    Py_buffer view;
+    int held;
+} Buf;
+
+static int get_array(PyObject *obj, Buf *b, const char *name, Py_ssize_t count, int writable, int index)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, &b->view, flags) < 0)
+        return -1;
+    b->held = 1;
+    const char *f = b->view.format ? b->view.format : "B";
+    if (*f == '<' || *f == '=' || *f == '@')
+        f++;
+    const int ok = index ? (b->view.itemsize == (Py_ssize_t)sizeof(Py_ssize_t) && (*f == 'l' || *f == 'q' || *f == 'n'))
+                         : (b->view.itemsize == 8 && *f == 'd');
+    if (!ok) {
+        PyErr_Format(PyExc_TypeError, "%s: expected a contiguous %s array", name, index ? "intp" : "float64");
+        return -1;
+    }
+    if (count >= 0 && b->view.len / b->view.itemsize != count) {
+        PyErr_Format(PyExc_ValueError, "%s: expected %zd values, got %zd", name, count, b->view.len / b->view.itemsize);
+        return -1;
+    }
+    return 0;
+}
+
+#define NBUF 16
+
+static PyObject *py_solve(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objs[NBUF];
+    double mu_c, dmu, alpha, sc4, sc5, sc6, radius, ftol, xtol, gtol, predicted_ftol;
+    int max_iterations, max_rejections;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOO(dddddd)diddddi:solve",
+                          &objs[0], &objs[1], &objs[2], &objs[3], &objs[4], &objs[5], &objs[6], &objs[7],
+                          &objs[8], &objs[9], &objs[10], &objs[11], &objs[12], &objs[13], &objs[14], &objs[15],
+                          &mu_c, &dmu, &alpha, &sc4, &sc5, &sc6, &radius, &max_iterations, &ftol, &xtol,
+                          &gtol, &predicted_ftol, &max_rejections))
+        return NULL;
+    static const char *names[NBUF] = {"pow_lam_v", "stiff", "lam_v", "mu", "wheel", "sw", "x", "lb", "ub",
+                                      "prior", "inv_prior_std", "tie", "gradient", "normal", "r_data", "r_work"};
+    Buf b[NBUF];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    Py_ssize_t m = -1;
+    for (int i = 0; i < NBUF; i++) {
+        Py_ssize_t count = -1;
+        if (i >= 1 && i <= 5)
+            count = m;
+        else if (i >= 6 && i <= 10)
+            count = NP;
+        else if (i == 11)
+            count = NT * NW;
+        else if (i == 12)
+            count = NP;
+        else if (i == 13)
+            count = NP * NP;
+        const int writable = i == 6 || i >= 12;
+        if (get_array(objs[i], &b[i], names[i], count, writable, i == 4) < 0)
+            goto out;
+        if (i == 0)
+            m = b[0].view.len / 8;
+        if (i >= 14 && b[i].view.len / 8 < m) {
+            PyErr_Format(PyExc_ValueError, "%s: needs room for %zd values", names[i], m);
+            goto out;
+        }
+    }
+    const Py_ssize_t *wheel = (const Py_ssize_t *)b[4].view.buf;
+    for (Py_ssize_t j = 0; j < m; j++)
+        if (wheel[j] < 0 || wheel[j] >= NW) {
+            PyErr_SetString(PyExc_ValueError, "wheel: index outside 0..3");
+            goto out;
+        }
+    if (max_iterations < 0 || max_rejections < 1 || sc4 == 0 || sc5 == 0) {
+        PyErr_SetString(PyExc_ValueError, "bad solver settings");
+        goto out;
+    }
+    Problem p = {m, b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, b[5].view.buf, wheel,
+                 b[9].view.buf, b[10].view.buf, b[11].view.buf, mu_c, dmu, alpha, sc4, sc5, sc6};
+    Outcome o;
+    Py_BEGIN_ALLOW_THREADS
+    o = solve(&p, b[6].view.buf, b[7].view.buf, b[8].view.buf, radius, max_iterations, ftol, xtol, gtol,
+              max_rejections, predicted_ftol, b[12].view.buf, b[13].view.buf, b[14].view.buf, b[15].view.buf);
+    Py_END_ALLOW_THREADS
+    result = Py_BuildValue("(ddiOi)", o.cost, o.radius, o.iterations, o.converged ? Py_True : Py_False,
+                           o.evaluations);
+out:
+    for (int i = 0; i < NBUF; i++)
+        if (b[i].held)
+            PyBuffer_Release(&b[i].view);
+    return result;
+}
+
+/* ---------------------------------------------- peaks and partials at a handful of points */
+
+#define MAX_MODEL_SLIP 0.98   /* tyre_model.MAX_MODEL_SLIP */
+#define MAX_POINTS 16
+
+/* Up to MAX_POINTS floats from a sequence; returns the count or -1 with an exception. */
+static Py_ssize_t floats(PyObject *obj, double *out, const char *name)
+{
+    PyObject *seq = PySequence_Fast(obj, name);
+    if (!seq)
+        return -1;
+    const Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
+    if (n > MAX_POINTS) {
+        Py_DECREF(seq);
+        PyErr_Format(PyExc_ValueError, "%s: at most %d values", name, MAX_POINTS);
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        out[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, i));
+        if (out[i] == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(seq);
+            return -1;
+        }
+    }
+    Py_DECREF(seq);
+    return n;
+}
+
+static PyObject *tuple_of(const double *v, Py_ssize_t n)
+{
+    PyObject *t = PyTuple_New(n);
+    if (!t)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *f = PyFloat_FromDouble(v[i]);
+        if (!f) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, f);
+    }
+    return t;
+}
+
+/* tyre_model._peaks_near: parabolic steps around each previous peak slip; None when some
+ * peak is not bracketed (the caller then searches the grid). */
+static PyObject *py_peaks_near(PyObject *self, PyObject *args)
+{
+    (void)self;
+    double v, mu_c, dmu, alpha, theta_k, v_s, sigma2, thetas[MAX_POINTS], near[MAX_POINTS];
+    PyObject *theta_obj, *near_obj;
+    if (!PyArg_ParseTuple(args, "dOO(dddddd):peaks_near", &v, &theta_obj, &near_obj, &mu_c, &dmu, &alpha,
+                          &theta_k, &v_s, &sigma2))
+        return NULL;
+    const Py_ssize_t n = floats(theta_obj, thetas, "thetas");
+    if (n < 0)
+        return NULL;
+    const Py_ssize_t n_near = floats(near_obj, near, "near");
+    if (n_near < 0)
+        return NULL;
+    const double v_ratio = v / v_s, s2v = sigma2 * v, low = 2e-3, high = 0.9 * MAX_MODEL_SLIP;
+    if (n_near != n || !(v_ratio > 0 && isfinite(v_ratio)))
+        Py_RETURN_NONE;
+    double mus[MAX_POINTS], lams[MAX_POINTS];
+#define MU_AT(lam_, theta_, out_)                                                           \
+    do {                                                                                    \
+        const double g_ = mu_c + dmu * exp(-pow((lam_) * v_ratio, alpha));                  \
+        double Z_ = ((theta_) * theta_k) * (lam_) / (g_ * (1.0 - (lam_)));                  \
+        if (Z_ < SMALL_Z)                                                                   \
+            Z_ = SMALL_Z;                                                                   \
+        (out_) = (g_ / (theta_)) * (1.0 + expm1(-Z_) / Z_) + s2v * (lam_);                  \
+    } while (0)
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double theta = thetas[i];
+        double lam = fmin(fmax(near[i], low), high);
+        const double steps[2] = {0.08, 0.02};
+        for (int k = 0; k < 2; k++) {
+            const double h = steps[k] * lam;
+            double y0, y1, y2;
+            MU_AT(lam - h, theta, y0);
+            MU_AT(lam, theta, y1);
+            MU_AT(lam + h, theta, y2);
+            const double denom = y0 - 2 * y1 + y2;
+            if (!(denom < 0 && y1 >= y0 && y1 >= y2))
+                Py_RETURN_NONE;
+            const double shift = 0.5 * (y0 - y2) / denom;
+            lam = lam + shift * h;
+            if (fabs(shift) <= 0.25)
+                break;
+        }
+        MU_AT(lam, theta, mus[i]);
+        if (!isfinite(mus[i]) || !isfinite(lam))
+            Py_RETURN_NONE;
+        lams[i] = lam;
+    }
+#undef MU_AT
+    PyObject *a = tuple_of(mus, n), *b = a ? tuple_of(lams, n) : NULL;
+    if (!b) {
+        Py_XDECREF(a);
+        return NULL;
+    }
+    return Py_BuildValue("(NN)", a, b);
+}
+
+/* tyre_model.braking_mu_and_partials_few: μ and ∂μ/∂(θ, σ0, v_s, σ2) at (λ_i, θ_i), one speed. */
+static PyObject *py_mu_partials_few(PyObject *self, PyObject *args)
+{
+    (void)self;
+    double v, mu_c, dmu, alpha, sigma0, k, v_s, sigma2, lams[MAX_POINTS], thetas[MAX_POINTS];
+    PyObject *lam_obj, *theta_obj;
+    if (!PyArg_ParseTuple(args, "OdO(ddddddd):mu_partials_few", &lam_obj, &v, &theta_obj, &mu_c, &dmu, &alpha,
+                          &sigma0, &k, &v_s, &sigma2))
+        return NULL;
+    const Py_ssize_t n = floats(lam_obj, lams, "lam");
+    if (n < 0)
+        return NULL;
+    if (floats(theta_obj, thetas, "theta") != n) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "lam and theta differ in length");
+        return NULL;
+    }
+    const double inv_v_s = 1.0 / v_s, inv_sigma0 = 1.0 / sigma0, c_v_s = alpha / v_s;
+    double mus[MAX_POINTS], rows[4 * MAX_POINTS];
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double lam = fmin(lams[i], MAX_MODEL_SLIP), theta = thetas[i];
+        const double lam_v = lam * v;
+        const double ratio = lam_v >= 0 ? pow(lam_v * inv_v_s, alpha) : NAN;
+        const double e = exp(-ratio), g = mu_c + dmu * e, inv_theta = 1.0 / theta;
+        const double Z = theta * k * lam / (g * (1.0 - lam));
+        double F, dF;
+        if (Z < SMALL_Z) {
+            F = Z / 2.0 - Z * Z / 6.0;
+            dF = 0.5 - Z / 3.0;
+        } else {
+            const double one_minus = -expm1(-Z), inv_Z = 1.0 / Z;
+            F = 1.0 - one_minus * inv_Z;
+            dF = (one_minus - Z * exp(-Z)) * inv_Z * inv_Z;
+        }
+        const double g_over_theta = g * inv_theta, ZdF = Z * dF;
+        rows[4 * i] = g_over_theta * inv_theta * (ZdF - F);
+        rows[4 * i + 1] = g_over_theta * ZdF * inv_sigma0;
+        rows[4 * i + 2] = (F - ZdF) * inv_theta * dmu * e * c_v_s * ratio;
+        rows[4 * i + 3] = lam_v;
+        mus[i] = g_over_theta * F + sigma2 * lam_v;
+    }
+    PyObject *a = tuple_of(mus, n), *b = a ? tuple_of(rows, 4 * n) : NULL;
+    if (!b) {
+        Py_XDECREF(a);
+        return NULL;
+    }
+    return Py_BuildValue("(NN)", a, b);
+}
+
+static PyMethodDef methods[] = {
+    {"solve", py_solve, METH_VARARGS,
+     "solve(pow_lam_v, stiff, lam_v, mu, wheel, sw, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
+     "      r_data, r_work, (mu_c, dmu, alpha, sc4, sc5, sc6), radius, max_iterations, ftol, xtol, gtol,\n"
+     "      predicted_ftol, max_rejections) -> (cost, radius, iterations, converged, evaluations)\n\n"
+     "The estimator's fit: x (in/out), gradient, normal and r_data (the weighted data residuals)\n"
+     "are written in place at the returned point."},
+    {"peaks_near", py_peaks_near, METH_VARARGS,
+     "peaks_near(v, thetas, near, (mu_c, dmu, alpha, sigma0*L, v_s, sigma2)) -> (mus, lams) | None\n\n"
+     "tyre_model._peaks_near for up to 16 wheels."},
+    {"mu_partials_few", py_mu_partials_few, METH_VARARGS,
+     "mu_partials_few(lams, v, thetas, (mu_c, dmu, alpha, sigma0, sigma0*L, v_s, sigma2)) -> (mus, rows)\n\n"
+     "tyre_model.braking_mu_and_partials_few; rows flat, 4 per point."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_fitcore",
+                                    "The estimator's per-update numerics (fit, peaks, partials), compiled.", -1, methods};
+
+PyMODINIT_FUNC PyInit__fitcore(void)
+{
+    return PyModule_Create(&module);
+}

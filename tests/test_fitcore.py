@@ -1,0 +1,222 @@
+"""The compiled per-update fit (`frictiond._fitcore`) against the numpy path it replaces."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from frictiond import estimator as estimator_module
+from frictiond import tyre_model as tm
+from frictiond.estimator import LugreTrustRegionEstimator
+from frictiond.samples import Status
+
+from .test_estimator import braking, lugre_curve
+
+core = estimator_module.compiled_fit
+
+
+def test_the_compiled_fit_is_built():
+    # scripts/test.sh installs a C compiler and Python's headers, so the test venv must have it;
+    # a silent fallback to numpy would make every benchmark figure wrong.
+    assert core is not None, "frictiond._fitcore did not build: see the pip install output (gcc, python3-dev)"
+
+
+def _window_problem(theta=2.0, seed=4, duration=0.6):
+    p = tm.LugreParams(theta=theta, sigma0=230.0, v_s=5.0, sigma2=0.002)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    est.core = None
+    for s in braking(lambda t, i: curve, seed=seed, duration=duration):
+        est.update(s)
+    times = est._window.view()[3]
+    sw = np.sqrt(est._weights(float(times[-1]), times)) / est.options.measurement_std
+    return est, sw
+
+
+def _compiled_normal(est, x, sw):
+    """One evaluation of the compiled normal equations (zero iterations)."""
+    w = est._window
+    lo, hi = w.start, w.end
+    x = x.copy()
+    gradient, normal = np.empty(7), np.empty((7, 7))
+    r_data, r_work = np.empty(hi - lo), np.empty(hi - lo)
+    cost, *_ = core.solve(w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, x,
+                          np.full(7, -np.inf), np.full(7, np.inf), est._prior, est._inv_prior_std, est._tie_rel_d,
+                          gradient, normal, r_data, r_work, est._core_constants, 1.0, 0, 1e-8, 1e-8, 1e-8, 0.0, 4)
+    return cost, gradient, normal, r_data
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+@pytest.mark.parametrize("offset", [[0.0] * 7, [0.1, -0.2, 0.3, 0.05, 0.1, -0.1, 0.2], [-3.0, -3.0, 2.0, 2.0, 1.5, 2.0, 0.5]])
+def test_compiled_normal_equations_match_numpy(offset):
+    est, sw = _window_problem()
+    x = est._x + np.array(offset)
+    cost, grad, normal, extra = est._normal(x, sw)
+    c_cost, c_grad, c_normal, c_r = _compiled_normal(est, x, sw)
+    assert c_cost == pytest.approx(cost, rel=1e-12)
+    np.testing.assert_allclose(c_grad, grad, rtol=1e-10, atol=1e-10 * np.abs(grad).max())
+    np.testing.assert_allclose(c_normal, normal, rtol=1e-10, atol=1e-12 * np.abs(normal).max())
+    np.testing.assert_allclose(c_r, extra[1], rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_compiled_normal_equations_use_the_series_near_zero_slip():
+    # Samples at tiny slip put Z below tyre_model._SMALL_Z, where the closed form of F loses digits.
+    est, _ = _window_problem()
+    w = est._window
+    t_last = float(w.time[w.end - 1])
+    for k in range(8):
+        w.append(1e-7 * (k + 1), 20.0, 0.001, t_last, k % 4)
+    times = w.view()[3]
+    sw = np.sqrt(est._weights(t_last, times)) / est.options.measurement_std
+    est._cache_x = None   # (the numpy path would reuse its rows from before the additions)
+    x = est._x.copy()
+    assert float((np.exp(x[:4]).max() * x[4] * est._shared_scale[0]) * w.stiff[w.end - 1] / 0.8) < tm._SMALL_Z
+    cost, grad, normal, extra = est._normal(x, sw)
+    c_cost, c_grad, c_normal, c_r = _compiled_normal(est, x, sw)
+    np.testing.assert_allclose(c_r, extra[1], rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(c_grad, grad, rtol=1e-10, atol=1e-10 * np.abs(grad).max())
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+@pytest.mark.parametrize("theta", [1.0, 3.5, 30.0])
+def test_compiled_solve_to_tolerance_finds_the_numpy_solution(theta):
+    from frictiond import trust_region
+
+    est, sw = _window_problem(theta=theta, seed=2, duration=1.0)
+    start = est._prior.copy()
+    reference = trust_region.solve_normal(lambda x: est._normal(x, sw), start, est._lb, est._ub, max_iterations=200,
+                                          ftol=1e-12, xtol=1e-12, gtol=1e-12)
+    w = est._window
+    lo, hi = w.start, w.end
+    x = start.copy()
+    gradient, normal = np.empty(7), np.empty((7, 7))
+    r_data, r_work = np.empty(hi - lo), np.empty(hi - lo)
+    cost, radius, iterations, converged, evaluations = core.solve(
+        w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, x, est._lb, est._ub,
+        est._prior, est._inv_prior_std, est._tie_rel_d, gradient, normal, r_data, r_work, est._core_constants,
+        math.nan, 200, 1e-12, 1e-12, 1e-12, 0.0, 60)
+    assert converged and iterations >= 2 and evaluations >= iterations
+    assert cost == pytest.approx(reference.cost, rel=1e-9)
+    np.testing.assert_allclose(x, reference.x, atol=1e-5)
+    # What the estimator reports from x: the wheels' peaks.
+    p_ref, p_c = est._params(reference.x), est._params(x)
+    mu_ref, _ = tm.peaks(10.0, p_ref, est._thetas(reference.x))
+    mu_c, _ = tm.peaks(10.0, p_c, est._thetas(x))
+    np.testing.assert_allclose(mu_c, mu_ref, atol=1e-7)
+    # ... and the arrays handed back belong to that x.
+    c_cost, c_grad, c_normal, c_r = _compiled_normal(est, x, sw)
+    np.testing.assert_allclose(normal, c_normal, rtol=1e-12)
+    np.testing.assert_allclose(r_data, c_r, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+@pytest.mark.parametrize("theta, seed", [(1.0, 1), (2.5, 3), (25.0, 5)])
+def test_the_estimator_says_the_same_on_both_paths(theta, seed, monkeypatch):
+    # Everything compiled against an install without a compiler (fit, peaks, partials in Python).
+    p = tm.LugreParams(theta=theta, sigma0=230.0, v_s=5.0, sigma2=0.002)
+    curve = lugre_curve(p)
+    samples = list(braking(lambda t, i: curve, seed=seed))
+    compiled = LugreTrustRegionEstimator()
+    compiled_estimates = [compiled.update(s) for s in samples]
+    monkeypatch.setattr(tm, "_compiled", None)
+    numpy_path = LugreTrustRegionEstimator()
+    numpy_path.core = None
+    for s, a in zip(samples, compiled_estimates):
+        b = numpy_path.update(s)
+        assert a.status == b.status
+        assert a.mu_max == pytest.approx(b.mu_max, abs=1e-5)
+        assert a.confidence == pytest.approx(b.confidence, abs=1e-4)
+    assert compiled._fits > 100 and compiled._fits == numpy_path._fits
+    assert sum(e.status == Status.VALID for e in compiled_estimates) > 0.3 * len(samples)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_compiled_fit_rejects_bad_arrays_with_a_message():
+    est, sw = _window_problem()
+    w = est._window
+    lo, hi = w.start, w.end
+    args = [w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, est._x.copy(),
+            est._lb, est._ub, est._prior, est._inv_prior_std, est._tie_rel_d, np.empty(7), np.empty((7, 7)),
+            np.empty(hi - lo), np.empty(hi - lo), est._core_constants, 1.0, 2, 1e-4, 1e-4, 1e-8, 1e-3, 4]
+    bad = list(args)
+    bad[5] = sw.astype(np.float32)
+    with pytest.raises(TypeError, match="sw"):
+        core.solve(*bad)
+    bad = list(args)
+    bad[1] = w.stiff[lo:hi - 1]
+    with pytest.raises(ValueError, match="stiff"):
+        core.solve(*bad)
+    bad = list(args)
+    bad[4] = w.wheel[lo:hi].copy()
+    bad[4][3] = 7
+    with pytest.raises(ValueError, match="wheel"):
+        core.solve(*bad)
+    bad = list(args)
+    bad[6] = est._x.copy()
+    bad[6].flags.writeable = False
+    with pytest.raises((TypeError, BufferError, ValueError)):
+        core.solve(*bad)
+    assert core.solve(*args)[2] >= 0   # the good arguments still work
+
+
+def test_the_numpy_path_is_still_valid_on_its_own(monkeypatch):
+    # The fallback for installs without a compiler: it alone must still estimate well.
+    monkeypatch.setattr(tm, "_compiled", None)
+    p = tm.LugreParams(theta=1.6, sigma0=230.0, v_s=5.0, sigma2=0.002)
+    curve = lugre_curve(p)
+    est = LugreTrustRegionEstimator()
+    est.core = None
+    statuses = [est.update(s).status for s in braking(lambda t, i: curve, seed=1)]
+    assert statuses.count(Status.VALID) > 0.6 * len(statuses)
+    assert est._cache_x is not None   # (the numpy path's row cache was used)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_compiled_peaks_and_partials_match_the_float_code(monkeypatch):
+    rng = np.random.default_rng(11)
+    cases = []
+    for _ in range(200):
+        p = tm.LugreParams(sigma0=float(rng.uniform(60, 600)), v_s=float(rng.uniform(1.0, 15.0)),
+                           sigma2=float(rng.uniform(0.0, 0.01)))
+        thetas = np.exp(rng.uniform(np.log(0.8), np.log(60.0), 4))
+        v = float(rng.uniform(1.0, 40.0))
+        lam = rng.uniform(1e-5, 0.99, 4)
+        cases.append((p, thetas, v, lam))
+    compiled = []
+    for p, thetas, v, lam in cases:
+        exact = tm.peaks(v, p, thetas)                       # grid search (no `near`)
+        near = exact[1] * rng.uniform(0.97, 1.03, 4)
+        compiled.append((tm._peaks_near(v, p, thetas, near), tm.braking_mu_and_partials_few(lam, v, thetas, p), near))
+    monkeypatch.setattr(tm, "_compiled", None)
+    bracketed = 0
+    for (p, thetas, v, lam), (c_peaks, c_few, near) in zip(cases, compiled):
+        f_peaks = tm._peaks_near(v, p, thetas, near)
+        assert (c_peaks is None) == (f_peaks is None)
+        if f_peaks is not None:
+            bracketed += 1
+            np.testing.assert_allclose(c_peaks[0], f_peaks[0], rtol=1e-13)
+            np.testing.assert_allclose(c_peaks[1], f_peaks[1], rtol=1e-12)
+        f_few = tm.braking_mu_and_partials_few(lam, v, thetas, p)
+        np.testing.assert_allclose(c_few[0], f_few[0], rtol=1e-13)
+        np.testing.assert_allclose(c_few[1], f_few[1], rtol=1e-12, atol=1e-300)
+        assert c_few[1].shape == (4, 4)
+    assert bracketed > 50   # (the others: some wheel's peak not bracketed, refused on both paths)
+    # Not bracketed: a `near` far from the peak is refused on both paths (the grid then searches).
+    p, thetas, v, _ = cases[0]
+    far = tm.peaks(v, p, thetas)[1] * 4.0
+    monkeypatch.setattr(tm, "_compiled", core)
+    assert tm._peaks_near(v, p, thetas, far) is None
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_compiled_peaks_refuse_bad_arguments():
+    with pytest.raises(ValueError, match="at most"):
+        core.peaks_near(10.0, [1.0] * 17, [0.1] * 17, (0.8, 0.75, 0.5, 36.0, 6.0, 0.002))
+    with pytest.raises(TypeError):
+        core.mu_partials_few([0.1, "x"], 10.0, [1.0, 1.0], (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002))
+    with pytest.raises(ValueError, match="length"):
+        core.mu_partials_few([0.1, 0.2], 10.0, [1.0], (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002))
+    assert core.peaks_near(10.0, [1.0], [0.1, 0.2], (0.8, 0.75, 0.5, 36.0, 6.0, 0.002)) is None
+    assert core.peaks_near(0.0, [1.0], [0.1], (0.8, 0.75, 0.5, 36.0, 6.0, 0.002)) is None

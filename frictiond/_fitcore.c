@@ -495,11 +495,11 @@ static PyObject *py_solve(PyObject *self, PyObject *args)
     }
     Problem p = {m, b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, b[5].view.buf, wheel,
                  b[9].view.buf, b[10].view.buf, b[11].view.buf, mu_c, dmu, alpha, sc4, sc5, sc6};
-    Outcome o;
-    Py_BEGIN_ALLOW_THREADS
-    o = solve(&p, b[6].view.buf, b[7].view.buf, b[8].view.buf, radius, max_iterations, ftol, xtol, gtol,
-              max_rejections, predicted_ftol, b[12].view.buf, b[13].view.buf, b[14].view.buf, b[15].view.buf);
-    Py_END_ALLOW_THREADS
+    /* The GIL stays held: tens of microseconds, and a release would let the daemon's other
+     * threads (or a test bench's sender) in mid-update, adding their time to the latency. */
+    const Outcome o = solve(&p, b[6].view.buf, b[7].view.buf, b[8].view.buf, radius, max_iterations, ftol, xtol,
+                            gtol, max_rejections, predicted_ftol, b[12].view.buf, b[13].view.buf, b[14].view.buf,
+                            b[15].view.buf);
     result = Py_BuildValue("(ddiOi)", o.cost, o.radius, o.iterations, o.converged ? Py_True : Py_False,
                            o.evaluations);
 out:
@@ -662,6 +662,139 @@ static PyObject *py_mu_partials_few(PyObject *self, PyObject *args)
     return Py_BuildValue("(NN)", a, b);
 }
 
+/* ------------------------------------------------------------ per-wheel statistics */
+
+static int cmp_double(const void *a, const void *b)
+{
+    const double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* numpy's linear quantile of sorted values (its lerp, the same on both sides of 1/2). */
+static double quantile_sorted(const double *v, Py_ssize_t n, double q)
+{
+    const double virtual_index = (n - 1) * q;
+    Py_ssize_t i = (Py_ssize_t)floor(virtual_index);
+    if (i > n - 1)
+        i = n - 1;
+    const double t = virtual_index - i;
+    if (i >= n - 1)
+        return v[n - 1];
+    const double a = v[i], b = v[i + 1], diff = b - a;
+    return t >= 0.5 ? b - diff * (1 - t) : a + diff * t;
+}
+
+#define N_STATS 12
+
+/* Per wheel, over the samples given (time order): n; the 10 % and 90 % slip quantiles; the
+ * slips and μ of order k_lo, k_hi (k = n // 10 from each end, as the excitation test takes
+ * them); the fastest slip run-away over `lag` samples whose force did not follow; the sums
+ * of the through-origin quadratic fit. estimator._wheel_stats_numpy is the reference. */
+static PyObject *py_wheel_stats(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objs[4];
+    int lag;
+    double elasticity;
+    if (!PyArg_ParseTuple(args, "OOOOid:wheel_stats", &objs[0], &objs[1], &objs[2], &objs[3], &lag, &elasticity))
+        return NULL;
+    static const char *names[4] = {"slip", "mu", "wheel", "times"};
+    Buf b[4];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    double *work = NULL;
+    Py_ssize_t m = -1;
+    for (int i = 0; i < 4; i++) {
+        if (get_array(objs[i], &b[i], names[i], m, 0, i == 2) < 0)
+            goto out;
+        if (i == 0)
+            m = b[0].view.len / 8;
+    }
+    if (lag < 1) {
+        PyErr_SetString(PyExc_ValueError, "lag: must be >= 1");
+        goto out;
+    }
+    const double *slip = b[0].view.buf, *mu = b[1].view.buf, *times = b[3].view.buf;
+    const Py_ssize_t *wheel = b[2].view.buf;
+    work = PyMem_Malloc((size_t)(4 * (m + 1)) * sizeof(double));
+    if (!work) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    double *lam = work, *mus = work + (m + 1), *ts = work + 2 * (m + 1), *sorted = work + 3 * (m + 1);
+    result = PyTuple_New(NW);
+    if (!result)
+        goto out;
+    for (int w = 0; w < NW; w++) {
+        Py_ssize_t n = 0;
+        double s2 = 0, s3 = 0, s4 = 0, y1 = 0, y2 = 0;
+        for (Py_ssize_t j = 0; j < m; j++) {
+            if (wheel[j] != w)
+                continue;
+            const double l = slip[j], l2 = l * l;
+            lam[n] = l;
+            mus[n] = mu[j];
+            ts[n] = times[j];
+            s2 += l2;
+            s3 += l2 * l;
+            s4 += l2 * l2;
+            y1 += l * mu[j];
+            y2 += l2 * mu[j];
+            n++;
+        }
+        double stats[N_STATS];
+        for (int k = 0; k < N_STATS; k++)
+            stats[k] = NAN;
+        stats[0] = (double)n;
+        if (n > 0) {
+            memcpy(sorted, lam, n * sizeof(double));
+            qsort(sorted, n, sizeof(double), cmp_double);
+            stats[1] = quantile_sorted(sorted, n, 0.1);
+            stats[2] = quantile_sorted(sorted, n, 0.9);
+            Py_ssize_t k_hi = n - 1 - (n / 10 > 1 ? n / 10 : 1), k_lo = n / 10 > 1 ? n / 10 : 1;
+            if (k_hi < 0)
+                k_hi = 0;
+            if (k_lo > n - 1)
+                k_lo = n - 1;
+            stats[3] = sorted[k_lo];
+            stats[4] = sorted[k_hi];
+            memcpy(sorted, mus, n * sizeof(double));
+            qsort(sorted, n, sizeof(double), cmp_double);
+            stats[5] = sorted[k_hi];
+            double best = -INFINITY;
+            for (Py_ssize_t j = 0; j + lag < n; j++) {
+                const double d_lam = lam[j + lag] - lam[j];
+                double rate = d_lam / fmax(ts[j + lag] - ts[j], 1e-3);
+                if ((mus[j + lag] - mus[j]) * lam[j] > elasticity * d_lam * mus[j])
+                    rate = 0.0;   /* the force follows the slip: not a run-away */
+                if (rate != rate) {
+                    best = NAN;
+                    break;
+                }
+                best = rate > best ? rate : best;
+            }
+            stats[6] = best;
+        }
+        stats[7] = s2;
+        stats[8] = s3;
+        stats[9] = s4;
+        stats[10] = y1;
+        stats[11] = y2;
+        PyObject *t = tuple_of(stats, N_STATS);
+        if (!t) {
+            Py_CLEAR(result);
+            goto out;
+        }
+        PyTuple_SET_ITEM(result, w, t);
+    }
+out:
+    PyMem_Free(work);
+    for (int i = 0; i < 4; i++)
+        if (b[i].held)
+            PyBuffer_Release(&b[i].view);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"solve", py_solve, METH_VARARGS,
      "solve(pow_lam_v, stiff, lam_v, mu, wheel, sw, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
@@ -675,6 +808,9 @@ static PyMethodDef methods[] = {
     {"mu_partials_few", py_mu_partials_few, METH_VARARGS,
      "mu_partials_few(lams, v, thetas, (mu_c, dmu, alpha, sigma0, sigma0*L, v_s, sigma2)) -> (mus, rows)\n\n"
      "tyre_model.braking_mu_and_partials_few; rows flat, 4 per point."},
+    {"wheel_stats", py_wheel_stats, METH_VARARGS,
+     "wheel_stats(slip, mu, wheel, times, lag, elasticity) -> 4 tuples of 12 floats\n\n"
+     "estimator._wheel_stats_numpy: n, q10, q90, lam_lo, lam_hi, mu_hi, run-away rate, s2, s3, s4, y1, y2."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -166,6 +166,37 @@ def _quantile_pair(values: np.ndarray, q_low: float, q_high: float) -> tuple[flo
     return out[0], out[1]
 
 
+def _wheel_stats_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, lag: int,
+                       elasticity: float) -> tuple[tuple[float, ...], ...]:
+    """Per wheel, over the samples given (time order), what the slip range and the excitation
+    test read from them: n; the 10 % and 90 % slip quantiles; the slips of order k_lo and k_hi
+    and the μ of order k_hi (k = max(1, n // 10) from each end); the fastest slip run-away over
+    `lag` samples whose force did not follow (Δμ/μ ≤ elasticity·Δλ/λ), −∞ without any; the
+    sums Σλ², Σλ³, Σλ⁴, Σλμ, Σλ²μ of the through-origin quadratic. `_fitcore.wheel_stats` is
+    the same, compiled."""
+    out = []
+    for i in range(N_WHEELS):
+        sel = wheel == i
+        n = int(np.count_nonzero(sel))
+        if n == 0:
+            out.append((0.0,) + (math.nan,) * 6 + (0.0,) * 5)
+            continue
+        lam, m, t = slip[sel], mu[sel], times[sel]
+        q_low, q_high = _quantile_pair(lam, 0.1, 0.9)
+        k_hi = max(0, n - 1 - max(1, n // 10))
+        k_lo = min(n - 1, max(1, n // 10))
+        ordered = np.partition(lam, (k_lo, k_hi))
+        mu_hi = float(np.partition(m, k_hi)[k_hi])
+        d_lam = lam[lag:] - lam[:-lag]
+        rate = d_lam / np.maximum(t[lag:] - t[:-lag], 1e-3)
+        rate[(m[lag:] - m[:-lag]) * lam[:-lag] > elasticity * d_lam * m[:-lag]] = 0.0
+        best = float(rate.max()) if len(rate) else -math.inf
+        lam2 = lam * lam
+        out.append((float(n), q_low, q_high, float(ordered[k_lo]), float(ordered[k_hi]), mu_hi, best,
+                    float(lam @ lam), float(lam @ lam2), float(lam2 @ lam2), float(lam @ m), float(lam2 @ m)))
+    return tuple(out)
+
+
 class _Window:
     """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append.
 
@@ -714,7 +745,7 @@ class LugreTrustRegionEstimator:
         # `peak_extrapolation`× the slips actually seen (a monotone fit of a flat-topped road),
         # μ_max is read at that slip instead of at a "peak" near lock.
         if self._due(0) or self._slip_support is None:
-            self._slip_floor, self._slip_support = self._slip_range(slip, wheel, weights)
+            self._slip_floor, self._slip_support = self._slip_range(weights)
         support = self._slip_support
         if not np.isfinite(support).all() and np.isfinite(support).any():
             # A wheel without recent samples (held beyond max_slip, say) has seen no slips of its
@@ -768,7 +799,7 @@ class LugreTrustRegionEstimator:
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
         if self._due(1) or self._excitation_cache is None:
-            self._excitation_cache = self._excitation(slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, v_eval)
+            self._excitation_cache = self._excitation(weights, wheel_mu, wheel_lam, v_eval)
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(thetas.tolist()) / N_WHEELS
@@ -915,19 +946,23 @@ class LugreTrustRegionEstimator:
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
         self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
 
-    def _slip_range(self, slip, wheel, weights) -> tuple[np.ndarray, np.ndarray]:
+    def _slip_range(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
         without data gets (0, ∞): no bound on either side."""
-        first = self._recent_start(weights)
-        slip, wheel = slip[first:], wheel[first:]
         low = [0.0] * N_WHEELS
         high = [math.inf] * N_WHEELS
-        for i in range(N_WHEELS):
-            sel = slip[wheel == i]
-            if len(sel) >= self._min_wheel_samples:
-                q_low, high[i] = _quantile_pair(sel, 0.1, 0.9)
-                low[i] = max(0.0, q_low)
+        for i, stats in enumerate(self._wheel_stats(weights)):
+            if stats[0] >= self._min_wheel_samples:
+                low[i], high[i] = max(0.0, stats[1]), stats[2]
         return np.array(low), np.array(high)
+
+    def _wheel_stats(self, weights: np.ndarray) -> tuple[tuple[float, ...], ...]:
+        """`_wheel_stats_numpy` of the window's newest `excitation_window_s` (compiled when built)."""
+        w = self._window
+        lo = w.start + self._recent_start(weights)
+        args = (w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end], w.time[lo:w.end], self._runaway_lag,
+                self.options.excitation_runaway_elasticity)
+        return self.core.wheel_stats(*args) if self.core is not None else _wheel_stats_numpy(*args)
 
     def _recent_start(self, weights: np.ndarray) -> int:
         """Index of the first window sample weighted above the excitation window's threshold
@@ -942,7 +977,7 @@ class LugreTrustRegionEstimator:
         mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
         return mu
 
-    def _excitation(self, slip, mu_meas, wheel, weights, wheel_mu, wheel_lam, speed: float = 10.0) -> float:
+    def _excitation(self, weights: np.ndarray, wheel_mu: np.ndarray, wheel_lam: np.ndarray, speed: float = 10.0) -> float:
         """0 unless some wheel's recent data show the peak; rises to 1 as they reach it.
 
         Two independent pieces of evidence must agree, so that the fit cannot talk itself into
@@ -961,9 +996,7 @@ class LugreTrustRegionEstimator:
         o = self.options
         # Only the newest ABS cycles count: after a change of road the older samples describe
         # the old one.
-        first = self._recent_start(weights)
-        times = self._window.time[self._window.start + first:self._window.end]
-        slip, mu_meas, wheel = slip[first:], mu_meas[first:], wheel[first:]
+        wheel_stats = self._wheel_stats(weights)
         best = 0.0
         why = self.excitation_reasons = ["", "", "", ""]
         fit_at_hi = self._fit_at_high_slip(speed)
@@ -974,41 +1007,27 @@ class LugreTrustRegionEstimator:
             if at_bound[i]:
                 why[i] = "θ at its bound"
                 continue
-            sel = wheel == i
-            n = int(np.count_nonzero(sel))
+            n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = wheel_stats[i]
             if n < self._min_wheel_samples:
                 why[i] = "few samples"
                 continue
-            lam = slip[sel]
-            mu = mu_meas[sel]
-            k_hi = max(0, n - 1 - max(1, n // 10))
-            k_lo = min(n - 1, max(1, n // 10))
-            ordered = np.partition(lam, (k_lo, k_hi))
-            lam_lo, lam_hi = float(ordered[k_lo]), float(ordered[k_hi])
             if not self._peak_seen:
                 # Over its peak a tyre gives no more force as the brake torque rises: the wheel
                 # runs away into slip (ABS exists to catch this). Steady braking, however bent its
                 # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
                 # release bends them more), moves the slip slowly.
-                # Growth over ~50 ms: beyond the slip noise, within an ABS cycle.
-                # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
-                t_sel = times[sel]
-                lag = self._runaway_lag
-                rate = (lam[lag:] - lam[:-lag]) / np.maximum(t_sel[lag:] - t_sel[:-lag], 1e-3)
-                # ... and the force no longer following it: Δμ/μ ≤ elasticity·Δλ/λ. The pedal
+                # Growth over ~50 ms (`_runaway_lag` samples): beyond the slip noise, within an ABS
+                # cycle; and the force no longer following it: Δμ/μ ≤ elasticity·Δλ/λ. The pedal
                 # applied briskly moves the slip as fast in the linear region (0.3 /s at 65 % of
                 # the grip on wet), but there μ rises in proportion.
-                follows = (mu[lag:] - mu[:-lag]) * lam[:-lag] > (
-                    o.excitation_runaway_elasticity * (lam[lag:] - lam[:-lag]) * mu[:-lag])
-                rate[follows] = 0.0
+                # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
                 needed = min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi)
-                if not (len(rate) and float(rate.max()) >= needed):
+                if not runaway_rate >= needed:
                     why[i] = "slip not running away"
                     continue
             if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
                 # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
                 # ice): the shape of the curve near its peak is not observed ...
-                mu_hi = float(np.partition(mu, k_hi)[k_hi])
                 if (self._peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= float(wheel_lam[i])
                         and mu_hi >= o.min_utilisation * float(wheel_mu[i])):
                     # ... unless this stop's data have shown the peak already and the wheel now
@@ -1019,9 +1038,6 @@ class LugreTrustRegionEstimator:
                     continue
                 why[i] = "no slip spread"
                 continue
-            lam2 = lam * lam
-            s2, s3, s4 = float(lam @ lam), float(lam @ lam2), float(lam2 @ lam2)
-            y1, y2 = float(lam @ mu), float(lam2 @ mu)
             det = s2 * s4 - s3 * s3
             if det <= 1e-18 * max(s2 * s4, 1e-300):
                 why[i] = "degenerate"
@@ -1036,7 +1052,6 @@ class LugreTrustRegionEstimator:
             if bending > 0.5:
                 why[i] = f"not bending ({bending:.2f})"
                 continue
-            mu_hi = float(np.partition(mu, k_hi)[k_hi])
             if mu_hi > o.max_peak_secant * lam_hi:
                 # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
                 # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.

@@ -220,3 +220,26 @@ def test_compiled_peaks_refuse_bad_arguments():
         core.mu_partials_few([0.1, 0.2], 10.0, [1.0], (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002))
     assert core.peaks_near(10.0, [1.0], [0.1, 0.2], (0.8, 0.75, 0.5, 36.0, 6.0, 0.002)) is None
     assert core.peaks_near(0.0, [1.0], [0.1], (0.8, 0.75, 0.5, 36.0, 6.0, 0.002)) is None
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+@pytest.mark.parametrize("m, lag", [(0, 5), (3, 5), (7, 2), (40, 5), (400, 5), (401, 13)])
+def test_compiled_wheel_stats_match_numpy(m, lag):
+    from frictiond.estimator import _wheel_stats_numpy
+
+    rng = np.random.default_rng(m + lag)
+    slip = rng.uniform(0.001, 0.3, m)
+    slip[: m // 3] = np.round(slip[: m // 3], 2)          # ties, as a held wheel gives
+    mu = np.clip(3.0 * slip + rng.normal(0, 0.05, m), 0.01, None)
+    wheel = rng.choice([0, 1, 3], m).astype(np.intp)      # wheel 2 has no samples at all
+    times = np.cumsum(rng.uniform(0.0, 0.01, m))          # (repeated times: the 1 ms floor)
+    compiled = core.wheel_stats(slip, mu, wheel, times, lag, 0.3)
+    reference = _wheel_stats_numpy(slip, mu, wheel, times, lag, 0.3)
+    assert len(compiled) == 4
+    for c, r in zip(compiled, reference):
+        assert c[0] == r[0]
+        np.testing.assert_allclose(c[1:7], r[1:7], rtol=1e-12, equal_nan=True)
+        np.testing.assert_allclose(c[7:], r[7:], rtol=1e-10)
+    assert compiled[2][0] == 0 and math.isnan(compiled[2][1])
+    with pytest.raises(ValueError, match="lag"):
+        core.wheel_stats(slip, mu, wheel, times, 0, 0.3)

@@ -24,11 +24,30 @@ from scipy.optimize import least_squares
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import braking_samples, percentile, summary_us  # noqa: E402
 
-from frictiond import trust_region  # noqa: E402
+from frictiond import trust_region, tyre_model  # noqa: E402
 from frictiond.estimator import LugreTrustRegionEstimator, compiled_fit  # noqa: E402
 from frictiond.tyre_model import peaks  # noqa: E402
 
 TOL = dict(ftol=1e-8, xtol=1e-8, gtol=1e-8)
+
+
+def _timed_pass(est, samples):
+    """Every update of one estimator over the samples, back to back: (times, estimates, fitted)."""
+    times, estimates, fitted, snapshots = [], [], [], []
+    for sample in samples:
+        x_before = est._x.copy()
+        fits_before = est._fits
+        t0 = time.perf_counter()
+        estimates.append(est.update(sample))
+        times.append(time.perf_counter() - t0)
+        fitted.append(est._fits != fits_before)
+        if fitted[-1]:
+            # The refits start from the parameters before this update, on its window (copied).
+            w = est._window
+            window = {name: getattr(w, name)[w.start:w.end].copy()
+                      for name in ("slip", "speed", "mu", "time", "wheel", "pow_lam_v", "stiff", "lam_v")}
+            snapshots.append((sample, x_before, window))
+    return times, estimates, fitted, snapshots
 
 
 def main(argv=None) -> int:
@@ -38,28 +57,29 @@ def main(argv=None) -> int:
     config, samples = braking_samples()
     if compiled_fit is None:
         print("frictiond._fitcore is not built (no C compiler at install?): the compiled figures are missing")
+    # Pass 1: the estimator as installed; pass 2: the numpy path (what an install without a C
+    # compiler runs: fit, peaks and partials in numpy/floats); pass 3: the refits. Each pass runs
+    # back to back, so no pass runs with caches the others evicted.
     est = LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle)
-    numpy_est = LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle)
-    numpy_est.core = None
-    update_times, numpy_times, ours_full, core_full, scipy_full, mu_diff, core_diff, upd_diff, fits = (
-        [], [], [], [], [], [], [], [], 0)
-    path_diff = 0.0
-    compared_updates = []  # the estimator's own update on exactly the fits that were refitted
-    for sample in samples:
-        x_before = est._x.copy()
-        fits_before = est._fits
-        t0 = time.perf_counter()
-        estimate = est.update(sample)
-        update_times.append(time.perf_counter() - t0)
-        t0 = time.perf_counter()
-        numpy_estimate = numpy_est.update(sample)
-        numpy_times.append(time.perf_counter() - t0)
-        path_diff = max(path_diff, abs(estimate.mu_max - numpy_estimate.mu_max))
-        if est._fits == fits_before or fits >= args.limit:
-            continue
+    update_times, estimates, fitted, snapshots = _timed_pass(est, samples)
+    saved = tyre_model._compiled
+    tyre_model._compiled = None
+    try:
+        numpy_est = LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle)
+        numpy_est.core = None
+        numpy_times, numpy_estimates, _, _ = _timed_pass(numpy_est, samples)
+    finally:
+        tyre_model._compiled = saved
+    path_diff = max(abs(a.mu_max - b.mu_max) for a, b in zip(estimates, numpy_estimates))
+    fitting = [k for k, f in enumerate(fitted) if f]
+    braking_updates = [update_times[k] for k in fitting]
+    numpy_fitting = [numpy_times[k] for k in fitting]
+    compared_updates = braking_updates[:args.limit]  # the estimator's own update on the refitted fits
+    ours_full, core_full, scipy_full, mu_diff, core_diff, upd_diff = [], [], [], [], [], []
+    fits = 0
+    for k, (sample, x_before, w) in enumerate(snapshots[:args.limit]):
         fits += 1
-        compared_updates.append(update_times[-1])
-        slip, speeds, mu, times, wheel = est._window.view()
+        slip, speeds, mu, times, wheel = w["slip"], w["speed"], w["mu"], w["time"], w["wheel"]
         weights = est._weights(sample.time_s, times)
         sw = np.sqrt(weights) / est.options.measurement_std
         rows = np.arange(len(slip))
@@ -71,14 +91,12 @@ def main(argv=None) -> int:
         mine = trust_region.solve(fun, x_before, est._lb, est._ub, max_iterations=200, **TOL)
         ours_full.append(time.perf_counter() - t0)
         if compiled_fit is not None:
-            w = est._window
-            lo, hi = w.start, w.end
             x_core = x_before.copy()
             t0 = time.perf_counter()
-            compiled_fit.solve(w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw,
-                               x_core, est._lb, est._ub, est._prior, est._inv_prior_std, est._tie_rel_d, np.empty(7),
-                               np.empty((7, 7)), np.empty(hi - lo), np.empty(hi - lo), est._core_constants,
-                               float("nan"), 200, TOL["ftol"], TOL["xtol"], TOL["gtol"], 0.0, 60)
+            compiled_fit.solve(w["pow_lam_v"], w["stiff"], w["lam_v"], mu, wheel, sw, x_core, est._lb, est._ub,
+                               est._prior, est._inv_prior_std, est._tie_rel_d, np.empty(7), np.empty((7, 7)),
+                               np.empty(len(slip)), np.empty(len(slip)), est._core_constants, float("nan"), 200,
+                               TOL["ftol"], TOL["xtol"], TOL["gtol"], 0.0, 60)
             core_full.append(time.perf_counter() - t0)
         start = np.clip(x_before, est._lb + 1e-10, est._ub - 1e-10)
         t0 = time.perf_counter()
@@ -92,16 +110,15 @@ def main(argv=None) -> int:
         if compiled_fit is not None:
             mu_c = peaks(v, est._params(x_core), est._thetas(x_core))[0]
             core_diff.append(float(np.max(np.abs(mu_c - mu_b))))
-        mu_u = peaks(v, est._params(est._x), est._thetas(est._x))[0]   # the bounded update's own fit
+        # The bounded update's own fit: the parameters after the update of this snapshot.
+        x_after = snapshots[k + 1][1] if k + 1 < len(snapshots) else est._x
+        mu_u = peaks(v, est._params(x_after), est._thetas(x_after))[0]
         upd_diff.append(float(np.max(np.abs(mu_u - mu_b))))
-    fitting = [k for k, t in enumerate(numpy_times) if t > 20e-6]   # (held updates take a few µs)
-    braking_updates = [update_times[k] for k in fitting]
-    numpy_fitting = [numpy_times[k] for k in fitting]
     print(f"samples {len(samples)}, fits compared {fits}")
     print(f"estimator update (all)          {summary_us(update_times)}")
     print(f"estimator update (fitting)      {summary_us(braking_updates)}")
     print(f"  numpy path (fitting)          {summary_us(numpy_fitting)}")
-    print(f"  ratio numpy path / compiled fit (median): "
+    print(f"  ratio numpy path / as installed (median): "
           f"{statistics.median(numpy_fitting) / statistics.median(braking_updates):.2f}x; "
           f"max |Δμ_max| between the two paths {path_diff:.1e}")
     if core_full:

@@ -795,6 +795,143 @@ out:
     return result;
 }
 
+/* ------------------------------------------------------------- the reported peak */
+
+/* μ and the four partials at (λ, θ), one speed: braking_mu_and_partials_few for one point. */
+static double mu_partials_one(double lam, double v, double theta, const double *c, double *row)
+{
+    const double mu_c = c[0], dmu = c[1], alpha = c[2], sigma0 = c[3], k = c[4], v_s = c[5], sigma2 = c[6];
+    lam = fmin(lam, MAX_MODEL_SLIP);
+    const double lam_v = lam * v;
+    const double ratio = lam_v >= 0 ? pow(lam_v / v_s, alpha) : NAN;
+    const double e = exp(-ratio), g = mu_c + dmu * e, inv_theta = 1.0 / theta;
+    const double Z = theta * k * lam / (g * (1.0 - lam));
+    double F, dF;
+    if (Z < SMALL_Z) {
+        F = Z / 2.0 - Z * Z / 6.0;
+        dF = 0.5 - Z / 3.0;
+    } else {
+        const double one_minus = -expm1(-Z), inv_Z = 1.0 / Z;
+        F = 1.0 - one_minus * inv_Z;
+        dF = (one_minus - Z * exp(-Z)) * inv_Z * inv_Z;
+    }
+    const double g_over_theta = g * inv_theta, ZdF = Z * dF;
+    if (row) {
+        row[0] = g_over_theta * inv_theta * (ZdF - F);
+        row[1] = g_over_theta * ZdF / sigma0;
+        row[2] = (F - ZdF) * inv_theta * dmu * e * (alpha / v_s) * ratio;
+        row[3] = lam_v;
+    }
+    return g_over_theta * F + sigma2 * lam_v;
+}
+
+static double py_max0(double a) { return 0.0 > a ? 0.0 : a; }   /* Python's max(a, 0.0): NaN stays */
+
+/* The reported numbers from the wheels' peaks (LugreTrustRegionEstimator._report_numbers_numpy):
+ * each peak held within the slips the data support, the load-weighted μ_max, and by the delta
+ * method the standard deviations of μ_max and of each wheel's peak. */
+static PyObject *py_peak_report(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_mu, *o_lam, *o_support, *o_floor, *o_thetas, *o_share, *o_cov;
+    double extrapolation, extrapolation_max_slip, v, variance_factor, c[7], sc[3];
+    if (!PyArg_ParseTuple(args, "OOOOddOd(ddddddd)(ddd)OdO:peak_report", &o_mu, &o_lam, &o_support, &o_floor,
+                          &extrapolation, &extrapolation_max_slip, &o_thetas, &v, &c[0], &c[1], &c[2], &c[3], &c[4],
+                          &c[5], &c[6], &sc[0], &sc[1], &sc[2], &o_cov, &variance_factor, &o_share))
+        return NULL;
+    double wheel_mu[MAX_POINTS], wheel_lam[MAX_POINTS], support[MAX_POINTS], slip_floor[MAX_POINTS],
+        thetas[MAX_POINTS], share[MAX_POINTS];
+    if (floats(o_mu, wheel_mu, "wheel_mu") != NW || floats(o_lam, wheel_lam, "wheel_lam") != NW ||
+        floats(o_support, support, "support") != NW || floats(o_floor, slip_floor, "slip_floor") != NW ||
+        floats(o_thetas, thetas, "thetas") != NW || floats(o_share, share, "share") != NW) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "peak_report: four values per wheel");
+        return NULL;
+    }
+    Buf cb;
+    memset(&cb, 0, sizeof cb);
+    if (get_array(o_cov, &cb, "cov", NP * NP, 0, 0) < 0) {
+        if (cb.held)
+            PyBuffer_Release(&cb.view);
+        return NULL;
+    }
+    double cov[NP * NP];
+    memcpy(cov, cb.view.buf, sizeof cov);
+    PyBuffer_Release(&cb.view);
+    /* A wheel without recent samples is bounded by the slips its car-mates have seen. */
+    int any_finite = 0, all_finite = 1;
+    double finite_max = -INFINITY;
+    for (int i = 0; i < NW; i++) {
+        if (isfinite(support[i])) {
+            any_finite = 1;
+            finite_max = support[i] > finite_max ? support[i] : finite_max;
+        } else
+            all_finite = 0;
+    }
+    if (!all_finite && any_finite)
+        for (int i = 0; i < NW; i++)
+            if (!isfinite(support[i]))
+                support[i] = finite_max;
+    int capped[NW];
+    double G[NW][NP], row[4];
+    for (int i = 0; i < NW; i++) {
+        const double cap = fmin(support[i] * extrapolation, fmax(support[i], extrapolation_max_slip));
+        const double floor_i = slip_floor[i] / extrapolation;
+        const int beyond = wheel_lam[i] > cap, below = wheel_lam[i] < floor_i;
+        capped[i] = beyond || below;
+        if (capped[i]) {
+            const double limit = beyond ? cap : floor_i;
+            const double mu_cap = mu_partials_one(limit, v, thetas[i], c, NULL);
+            wheel_mu[i] = mu_cap < wheel_mu[i] ? mu_cap : wheel_mu[i];   /* np.minimum */
+            if (mu_cap != mu_cap)
+                wheel_mu[i] = mu_cap;
+            wheel_lam[i] = limit;
+        }
+        /* Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem). */
+        mu_partials_one(wheel_lam[i], v, thetas[i], c, row);
+        for (int k = 0; k < NP; k++)
+            G[i][k] = 0.0;
+        G[i][i] = row[0] * thetas[i];
+        G[i][NW] = row[1] * sc[0];
+        G[i][NW + 1] = row[2] * sc[1];
+        G[i][NW + 2] = row[3] * sc[2];
+    }
+    double mu_max = 0.0, slip_star = 0.0, g_mean[NP] = {0}, wheel_std[NW];
+    for (int i = 0; i < NW; i++) {
+        mu_max += share[i] * wheel_mu[i];
+        slip_star += share[i] * wheel_lam[i];
+        for (int k = 0; k < NP; k++)
+            g_mean[k] += share[i] * G[i][k];
+    }
+    double var = 0.0;
+    for (int a = 0; a < NP; a++)
+        for (int b = 0; b < NP; b++)
+            var += g_mean[a] * cov[a * NP + b] * variance_factor * g_mean[b];
+    for (int i = 0; i < NW; i++) {
+        double w = 0.0;
+        for (int a = 0; a < NP; a++)
+            for (int b = 0; b < NP; b++)
+                w += G[i][a] * cov[a * NP + b] * variance_factor * G[i][b];
+        wheel_std[i] = w == w ? sqrt(py_max0(w)) : w;
+    }
+    const double mu_std = sqrt(py_max0(var));
+    PyObject *t_mu = tuple_of(wheel_mu, NW), *t_lam = tuple_of(wheel_lam, NW), *t_std = tuple_of(wheel_std, NW);
+    PyObject *t_capped = PyTuple_New(NW);
+    if (!t_mu || !t_lam || !t_std || !t_capped) {
+        Py_XDECREF(t_mu);
+        Py_XDECREF(t_lam);
+        Py_XDECREF(t_std);
+        Py_XDECREF(t_capped);
+        return NULL;
+    }
+    for (int i = 0; i < NW; i++) {
+        PyObject *flag = capped[i] ? Py_True : Py_False;
+        Py_INCREF(flag);
+        PyTuple_SET_ITEM(t_capped, i, flag);
+    }
+    return Py_BuildValue("(NNNdddN)", t_mu, t_lam, t_capped, mu_max, slip_star, mu_std, t_std);
+}
+
 static PyMethodDef methods[] = {
     {"solve", py_solve, METH_VARARGS,
      "solve(pow_lam_v, stiff, lam_v, mu, wheel, sw, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
@@ -811,6 +948,10 @@ static PyMethodDef methods[] = {
     {"wheel_stats", py_wheel_stats, METH_VARARGS,
      "wheel_stats(slip, mu, wheel, times, lag, elasticity) -> 4 tuples of 12 floats\n\n"
      "estimator._wheel_stats_numpy: n, q10, q90, lam_lo, lam_hi, mu_hi, run-away rate, s2, s3, s4, y1, y2."},
+    {"peak_report", py_peak_report, METH_VARARGS,
+     "peak_report(wheel_mu, wheel_lam, support, slip_floor, peak_extrapolation, extrapolation_max_slip, thetas,\n"
+     "            v, (mu_c, dmu, alpha, sigma0, sigma0*L, v_s, sigma2), (sc4, sc5, sc6), cov_unit,\n"
+     "            variance_factor, share) -> (wheel_mu, wheel_lam, capped, mu_max, slip_star, mu_std, wheel_std)"},
     {NULL, NULL, 0, NULL},
 };
 

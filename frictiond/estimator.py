@@ -197,6 +197,56 @@ def _wheel_stats_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, time
     return tuple(out)
 
 
+def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: list[float], slip_floor: list[float],
+                       peak_extrapolation: float, extrapolation_max_slip: float, thetas: list[float], v: float,
+                       p: LugreParams, scales: tuple[float, float, float], cov_unit: np.ndarray,
+                       variance_factor: float, share: list[float]) -> tuple:
+    """The reported numbers from the wheels' peaks: (wheel μ_max, wheel λ*, capped, μ_max, λ*,
+    std of μ_max, std of each wheel's μ_max). `_fitcore.peak_report` is the same, compiled.
+
+    Each peak is held within the slips the data support (`support`: the high end of each wheel's
+    recent slips; `slip_floor`: the low end): when the fitted curve keeps rising past
+    `peak_extrapolation`× the slips seen (a monotone fit of a flat-topped road), μ_max is read at
+    that slip instead of at a "peak" near lock; and data that only ever sit far past the fitted
+    peak (a road whose μ keeps creeping up to high slip, an ABS that holds the wheels there) say
+    nothing of a hump the model puts at small slips, so μ_max is read where the data begin.
+    The road's μ_max is the wheels' peaks weighted by their normal loads (`share`): the body
+    equation pins the total braking force (Σ μ_i·F_z,i), not its front/rear split (pad friction
+    differs per axle), so the load-weighted mean is right when the plain mean is not. The
+    standard deviations are the delta method's: ∂μ_max/∂x at each peak (envelope theorem).
+    """
+    wheel_mu, wheel_lam, support = np.array(wheel_mu), np.array(wheel_lam), np.array(support)
+    thetas = np.array(thetas)
+    if not np.isfinite(support).all() and np.isfinite(support).any():
+        # A wheel without recent samples (held beyond max_slip, say) has seen no slips of its
+        # own lately: it is bounded by the slips its car-mates have seen, not left to read
+        # its peak at lock.
+        support = np.where(np.isfinite(support), support, support[np.isfinite(support)].max())
+    cap = np.minimum(support * peak_extrapolation, np.maximum(support, extrapolation_max_slip))
+    beyond = wheel_lam > cap
+    floor = np.array(slip_floor) / peak_extrapolation
+    below = wheel_lam < floor
+    capped = beyond | below
+    if capped.any():
+        limit = np.where(beyond, cap, floor)
+        mu_cap, _ = braking_mu_and_partials_few(limit, v, thetas, p)
+        wheel_mu = np.where(capped, np.minimum(mu_cap, wheel_mu), wheel_mu)
+        wheel_lam = np.where(capped, limit, wheel_lam)
+    _, jac = braking_mu_and_partials_few(wheel_lam, v, thetas, p)
+    sc4, sc5, sc6 = scales
+    G = np.array([[0.0] * i + [j[0] * th] + [0.0] * (N_WHEELS - 1 - i) + [j[1] * sc4, j[2] * sc5, j[3] * sc6]
+                  for i, (j, th) in enumerate(zip(jac.tolist(), thetas.tolist()))])
+    cov = cov_unit * variance_factor
+    g_mean = np.dot(share, G)
+    mu_max = sum(s * m for s, m in zip(share, wheel_mu.tolist()))
+    slip_star = sum(s * lam for s, lam in zip(share, wheel_lam.tolist()))
+    with np.errstate(invalid="ignore"):   # (a singular normal matrix left cov infinite: NaN std)
+        mu_std = math.sqrt(max(float(g_mean @ cov @ g_mean), 0.0))
+        wheel_std = [math.sqrt(max(v, 0.0)) if v == v else v for v in (np.dot(G, cov) * G).sum(axis=1).tolist()]
+    return (tuple(wheel_mu.tolist()), tuple(wheel_lam.tolist()), tuple(capped.tolist()), mu_max, slip_star, mu_std,
+            tuple(wheel_std))
+
+
 class _Window:
     """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append.
 
@@ -352,7 +402,6 @@ class LugreTrustRegionEstimator:
         self._peak_seen = False
         self._last_fit_s = -math.inf
         self._last_update_s: float | None = None
-        self._cov: np.ndarray | None = None
         self._cov_unit: np.ndarray | None = None
 
     def _new_event(self) -> None:
@@ -368,7 +417,6 @@ class LugreTrustRegionEstimator:
         """
         self._excitation_cache = None
         self.excitation_reasons = ["", "", "", ""]
-        self._cov = None
         self._cov_unit = None
         self._slip_support = None
         self._capped = None
@@ -741,40 +789,13 @@ class LugreTrustRegionEstimator:
         v_eval = max(speed, 1.0)
         wheel_mu, wheel_lam = peaks(v_eval, p, thetas, near=self._last_peak_slips)
         self._last_peak_slips = wheel_lam
-        # Do not extrapolate far beyond the data: when the fitted curve keeps rising past
-        # `peak_extrapolation`× the slips actually seen (a monotone fit of a flat-topped road),
-        # μ_max is read at that slip instead of at a "peak" near lock.
         if self._due(0) or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(weights)
-        support = self._slip_support
-        if not np.isfinite(support).all() and np.isfinite(support).any():
-            # A wheel without recent samples (held beyond max_slip, say) has seen no slips of its
-            # own lately: it is bounded by the slips its car-mates have seen, not left to read
-            # its peak at lock.
-            support = np.where(np.isfinite(support), support, support[np.isfinite(support)].max())
-        cap = np.minimum(support * o.peak_extrapolation, np.maximum(support, o.extrapolation_max_slip))
-        beyond = wheel_lam > cap
-        # The other side: data that only ever sit far past the fitted peak (a road whose μ keeps
-        # creeping up to high slip, an ABS that holds the wheels there) say nothing of a hump
-        # the model puts at small slips; μ_max is read where the data begin instead.
-        floor = self._slip_floor / o.peak_extrapolation
-        below = wheel_lam < floor
-        self._capped = beyond | below
-        if self._capped.any():
-            limit = np.where(beyond, cap, floor)
-            mu_cap, _ = braking_mu_and_partials_few(limit, v_eval, thetas, p)
-            wheel_mu = np.where(self._capped, np.minimum(mu_cap, wheel_mu), wheel_mu)
-            wheel_lam = np.where(self._capped, limit, wheel_lam)
-        # Delta method: ∂μ_max/∂x at each wheel's peak (envelope theorem).
-        _, jac = braking_mu_and_partials_few(wheel_lam, v_eval, thetas, p)
-        sc4, sc5, sc6 = self._shared_scale
-        G = np.array([[0.0] * i + [j[0] * th] + [0.0] * (N_WHEELS - 1 - i) + [j[1] * sc4, j[2] * sc5, j[3] * sc6]
-                      for i, (j, th) in enumerate(zip(jac.tolist(), thetas.tolist()))])
         # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
         w_sum = float(weights.sum())
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, float(r_data @ r_data) / dof)
-        if self._cov is None or self._due(2):
+        if self._cov_unit is None or self._due(2):
             # Parameters held at a bound are fixed there for the covariance: the unconstrained
             # Gauss–Newton covariance would count spread into the infeasible side. Like the
             # excitation, it changes slowly: refreshed every few fits.
@@ -786,16 +807,15 @@ class LugreTrustRegionEstimator:
             except np.linalg.LinAlgError:
                 cov[:] = np.inf
             self._cov_unit = cov
-        cov = self._cov_unit * variance_factor
-        self._cov = cov
-        # The road's μ_max: the wheels' peaks weighted by their normal loads. The body equation
-        # pins the total braking force (Σ μ_i·F_z,i), not its front/rear split (pad friction
-        # differs per axle), so the load-weighted mean is right when the plain mean is not.
-        share = self._load_share
-        g_mean = np.dot(share, G)
-        mu_max = sum(s * m for s, m in zip(share, wheel_mu.tolist()))
-        mu_std = math.sqrt(max(float(g_mean @ cov @ g_mean), 0.0))
-        wheel_std = [math.sqrt(max(v, 0.0)) if v == v else v for v in (np.dot(G, cov) * G).sum(axis=1).tolist()]
+        args = (wheel_mu.tolist(), wheel_lam.tolist(), self._slip_support.tolist(), self._slip_floor.tolist(),
+                o.peak_extrapolation, o.extrapolation_max_slip, thetas.tolist(), v_eval)
+        tail = (self._shared_scale, self._cov_unit, variance_factor, self._load_share)
+        if self.core is not None:
+            numbers = self.core.peak_report(*args, (p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0,
+                                                    p.sigma0 * p.patch_length, p.v_s, p.sigma2), *tail)
+        else:
+            numbers = _peak_report_numpy(*args, p, *tail)
+        wheel_mu, wheel_lam, self._capped, mu_max, slip_star, mu_std, wheel_std = numbers
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
         if self._due(1) or self._excitation_cache is None:
@@ -803,7 +823,6 @@ class LugreTrustRegionEstimator:
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(thetas.tolist()) / N_WHEELS
-        slip_star = sum(s * lam for s, lam in zip(share, wheel_lam.tolist()))
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
                   "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
                   "jumps": float(self._jumps)}
@@ -829,10 +848,10 @@ class LugreTrustRegionEstimator:
                 # Braking goes on but the data no longer show the peak (a new road, or ABS
                 # backing off): report the fit, not trusted, rather than an old VALID.
                 return FrictionEstimate(now_s, Status.CONVERGING, mu_max, slip_star, theta_mean, 0.0,
-                                        tuple(float(m) for m in wheel_mu), mu_std, detail)
+                                        wheel_mu, mu_std, detail)
             return self._hold(now_s, speed)
         estimate = FrictionEstimate(now_s, status, mu_max, slip_star, theta_mean, confidence,
-                                    tuple(float(m) for m in wheel_mu), mu_std, detail)
+                                    wheel_mu, mu_std, detail)
         if status == Status.VALID:
             self._last_valid = estimate
         return estimate

@@ -243,3 +243,40 @@ def test_compiled_wheel_stats_match_numpy(m, lag):
     assert compiled[2][0] == 0 and math.isnan(compiled[2][1])
     with pytest.raises(ValueError, match="lag"):
         core.wheel_stats(slip, mu, wheel, times, 0, 0.3)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_compiled_peak_report_matches_numpy():
+    from frictiond.estimator import _peak_report_numpy
+
+    rng = np.random.default_rng(5)
+    capped_seen = {False: 0, True: 0}
+    for k in range(300):
+        p = tm.LugreParams(sigma0=float(rng.uniform(60, 600)), v_s=float(rng.uniform(1.0, 15.0)),
+                           sigma2=float(rng.uniform(0.0, 0.01)))
+        thetas = np.exp(rng.uniform(np.log(0.8), np.log(60.0), 4))
+        v = float(rng.uniform(1.0, 40.0))
+        wheel_mu, wheel_lam = tm.peaks(v, p, thetas)
+        support = rng.uniform(0.005, 0.3, 4)
+        support[rng.random(4) < 0.2] = np.inf          # wheels without recent samples
+        if k % 10 == 0:
+            support[:] = np.inf
+        floor = rng.uniform(0.0, 0.05, 4)
+        a = rng.normal(size=(7, 7))
+        cov_unit = a @ a.T * 1e-4
+        if k % 25 == 0:
+            cov_unit[:] = np.inf                            # a singular normal matrix
+        share = list(rng.dirichlet(np.ones(4)))
+        args = (wheel_mu.tolist(), wheel_lam.tolist(), support.tolist(), floor.tolist(), 2.0, 0.15, thetas.tolist(), v)
+        tail = ((1.0, 0.5, 3e-3), cov_unit, float(rng.uniform(1, 3)), share)
+        c = core.peak_report(*args, (p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.sigma0 * p.patch_length, p.v_s,
+                                     p.sigma2), *tail)
+        r = _peak_report_numpy(*args, p, *tail)
+        np.testing.assert_allclose(c[0], r[0], rtol=1e-13)
+        np.testing.assert_allclose(c[1], r[1], rtol=1e-13)
+        assert c[2] == r[2]
+        assert c[3] == pytest.approx(r[3], rel=1e-13) and c[4] == pytest.approx(r[4], rel=1e-13)
+        np.testing.assert_allclose([c[5], *c[6]], [r[5], *r[6]], rtol=1e-9, equal_nan=True)
+        for flag in c[2]:
+            capped_seen[flag] += 1
+    assert capped_seen[True] > 50 and capped_seen[False] > 50

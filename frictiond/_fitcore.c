@@ -932,6 +932,160 @@ static PyObject *py_peak_report(PyObject *self, PyObject *args)
     return Py_BuildValue("(NNNdddN)", t_mu, t_lam, t_capped, mu_max, slip_star, mu_std, t_std);
 }
 
+/* ------------------------------------------------- weights, residual bias, covariance */
+
+/* Forgetting weights exp(min(t − now, 0)/τ) and the rows' weights √w/σ, into w_out, sw_out. */
+static PyObject *py_weights(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_t, *o_w, *o_sw;
+    double now, tau, sigma;
+    if (!PyArg_ParseTuple(args, "OdddOO:weights", &o_t, &now, &tau, &sigma, &o_w, &o_sw))
+        return NULL;
+    Buf b[3];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    if (get_array(o_t, &b[0], "times", -1, 0, 0) < 0)
+        goto out;
+    const Py_ssize_t m = b[0].view.len / 8;
+    if (get_array(o_w, &b[1], "weights", m, 1, 0) < 0 || get_array(o_sw, &b[2], "sw", m, 1, 0) < 0)
+        goto out;
+    if (!(tau > 0) || !(sigma > 0)) {
+        PyErr_SetString(PyExc_ValueError, "tau and sigma must be > 0");
+        goto out;
+    }
+    const double *t = b[0].view.buf;
+    double *w = b[1].view.buf, *sw = b[2].view.buf;
+    const double inv_sigma = 1.0 / sigma;
+    for (Py_ssize_t j = 0; j < m; j++) {
+        w[j] = exp(fmin(t[j] - now, 0.0) / tau);
+        sw[j] = sqrt(w[j]) * inv_sigma;
+    }
+    result = Py_None;
+    Py_INCREF(result);
+out:
+    for (int i = 0; i < 3; i++)
+        if (b[i].held)
+            PyBuffer_Release(&b[i].view);
+    return result;
+}
+
+/* The newest residuals' bias, back in μ units (r·σ/√w) from index `first`: their mean, their
+ * root-mean-square deviation from it, and |Σ sign| / n. */
+static PyObject *py_residual_bias(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_r, *o_w;
+    Py_ssize_t first;
+    double sigma;
+    if (!PyArg_ParseTuple(args, "OOnd:residual_bias", &o_r, &o_w, &first, &sigma))
+        return NULL;
+    Buf b[2];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    if (get_array(o_r, &b[0], "r_data", -1, 0, 0) < 0)
+        goto out;
+    const Py_ssize_t m = b[0].view.len / 8;
+    if (get_array(o_w, &b[1], "weights", m, 0, 0) < 0)
+        goto out;
+    if (first < 0 || first >= m) {
+        PyErr_SetString(PyExc_ValueError, "first: outside the residuals");
+        goto out;
+    }
+    const double *r = b[0].view.buf, *w = b[1].view.buf;
+    const Py_ssize_t n = m - first;
+    double sum = 0.0, signs = 0.0;
+    for (Py_ssize_t j = first; j < m; j++) {
+        const double e = r[j] * sigma / sqrt(w[j]);
+        sum += e;
+        signs += (e > 0) - (e < 0);
+    }
+    const double mean = sum / n;
+    double dev2 = 0.0;
+    for (Py_ssize_t j = first; j < m; j++) {
+        const double d = r[j] * sigma / sqrt(w[j]) - mean;
+        dev2 += d * d;
+    }
+    result = Py_BuildValue("(ddd)", mean, sqrt(dev2 / n), fabs(signs / n));
+out:
+    for (int i = 0; i < 2; i++)
+        if (b[i].held)
+            PyBuffer_Release(&b[i].view);
+    return result;
+}
+
+/* The inverse of the normal matrix's block of free parameters, zero elsewhere, into `out`
+ * (Gauss–Jordan with partial pivoting). False, and `out` untouched, if the block is singular. */
+static PyObject *py_inverse_free(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_n, *o_free, *o_out;
+    if (!PyArg_ParseTuple(args, "OOO:inverse_free", &o_n, &o_free, &o_out))
+        return NULL;
+    double free_f[MAX_POINTS];
+    if (floats(o_free, free_f, "free") != NP) {
+        if (!PyErr_Occurred())
+            PyErr_Format(PyExc_ValueError, "free: %d flags", NP);
+        return NULL;
+    }
+    Buf b[2];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    if (get_array(o_n, &b[0], "normal", NP * NP, 0, 0) < 0 || get_array(o_out, &b[1], "out", NP * NP, 1, 0) < 0)
+        goto out;
+    const double *N = b[0].view.buf;
+    int idx[NP], k = 0;
+    for (int i = 0; i < NP; i++)
+        if (free_f[i] != 0.0)
+            idx[k++] = i;
+    double A[NP][2 * NP];
+    for (int i = 0; i < k; i++)
+        for (int j = 0; j < k; j++) {
+            A[i][j] = N[idx[i] * NP + idx[j]];
+            A[i][k + j] = i == j;
+        }
+    int singular = 0;
+    for (int c = 0; c < k && !singular; c++) {
+        int piv = c;
+        for (int r = c + 1; r < k; r++)
+            if (fabs(A[r][c]) > fabs(A[piv][c]))
+                piv = r;
+        if (A[piv][c] == 0.0 || !isfinite(A[piv][c])) {
+            singular = 1;
+            break;
+        }
+        if (piv != c)
+            for (int j = 0; j < 2 * k; j++) {
+                const double t = A[c][j];
+                A[c][j] = A[piv][j];
+                A[piv][j] = t;
+            }
+        const double inv = 1.0 / A[c][c];
+        for (int j = 0; j < 2 * k; j++)
+            A[c][j] *= inv;
+        for (int r = 0; r < k; r++)
+            if (r != c && A[r][c] != 0.0) {
+                const double f = A[r][c];
+                for (int j = 0; j < 2 * k; j++)
+                    A[r][j] -= f * A[c][j];
+            }
+    }
+    if (!singular) {
+        double *o = b[1].view.buf;
+        memset(o, 0, NP * NP * sizeof(double));
+        for (int i = 0; i < k; i++)
+            for (int j = 0; j < k; j++)
+                o[idx[i] * NP + idx[j]] = A[i][k + j];
+    }
+    result = singular ? Py_False : Py_True;
+    Py_INCREF(result);
+out:
+    for (int i = 0; i < 2; i++)
+        if (b[i].held)
+            PyBuffer_Release(&b[i].view);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"solve", py_solve, METH_VARARGS,
      "solve(pow_lam_v, stiff, lam_v, mu, wheel, sw, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
@@ -952,6 +1106,12 @@ static PyMethodDef methods[] = {
      "peak_report(wheel_mu, wheel_lam, support, slip_floor, peak_extrapolation, extrapolation_max_slip, thetas,\n"
      "            v, (mu_c, dmu, alpha, sigma0, sigma0*L, v_s, sigma2), (sc4, sc5, sc6), cov_unit,\n"
      "            variance_factor, share) -> (wheel_mu, wheel_lam, capped, mu_max, slip_star, mu_std, wheel_std)"},
+    {"weights", py_weights, METH_VARARGS,
+     "weights(times, now, tau, sigma, weights_out, sw_out): exp(min(t - now, 0)/tau) and sqrt(w)/sigma"},
+    {"residual_bias", py_residual_bias, METH_VARARGS,
+     "residual_bias(r_data, weights, first, sigma) -> (mean, rms deviation, |sum of signs| / n) of r*sigma/sqrt(w)"},
+    {"inverse_free", py_inverse_free, METH_VARARGS,
+     "inverse_free(normal, free, out) -> bool: the inverse of the free parameters' block, zero elsewhere"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -568,15 +568,19 @@ class LugreTrustRegionEstimator:
         n_recent = len(times) - first
         if n_recent < 8 or self._fits < 5 or len(times) - n_recent < 2 * n_recent:
             return 0.0
-        # Back from weighted, normalised residuals to μ units (model − measurement).
-        resid = r_data[first:] * o.measurement_std / np.sqrt(weights[first:])
-        # np.mean / np.std, without their wrappers (same operations, same order).
-        mean = float(resid.sum()) / n_recent
-        dev = resid - mean
-        dev *= dev
-        noise = max(o.measurement_std, math.sqrt(float(dev.sum()) / n_recent))
+        if self.core is not None:
+            mean, rms, same_sign = self.core.residual_bias(r_data, weights, first, o.measurement_std)
+        else:
+            # Back from weighted, normalised residuals to μ units (model − measurement).
+            resid = r_data[first:] * o.measurement_std / np.sqrt(weights[first:])
+            # np.mean / np.std, without their wrappers (same operations, same order).
+            mean = float(resid.sum()) / n_recent
+            dev = resid - mean
+            dev *= dev
+            rms = math.sqrt(float(dev.sum()) / n_recent)
+            same_sign = abs(float(np.sign(resid).sum()) / n_recent)
+        noise = max(o.measurement_std, rms)
         score = abs(mean) / (noise / math.sqrt(n_recent))
-        same_sign = abs(float(np.sign(resid).sum()) / n_recent)
         return score if same_sign > 0.7 else min(score, o.jump_threshold)
 
     def _detect_jump(self, now_s: float, score: float) -> None:
@@ -728,11 +732,13 @@ class LugreTrustRegionEstimator:
     def _fit(self, now_s: float, speed: float) -> FrictionEstimate:
         o = self.options
         slip, speeds, mu_meas, times, wheel = self._window.view()
-        weights = self._weights(now_s, times)
-        sw = np.sqrt(weights) * (1.0 / o.measurement_std)
         if self.core is not None:
+            weights, sw = np.empty(len(times)), np.empty(len(times))
+            self.core.weights(times, now_s, o.forgetting_time_constant, o.measurement_std, weights, sw)
             normal, r_data = self._solve_compiled(sw)
         else:
+            weights = self._weights(now_s, times)
+            sw = np.sqrt(weights) * (1.0 / o.measurement_std)
             normal, r_data = self._solve_numpy(sw)
         self._fits += 1
         self._last_fit_s = now_s
@@ -801,11 +807,16 @@ class LugreTrustRegionEstimator:
             # excitation, it changes slowly: refreshed every few fits.
             span = self._ub - self._lb
             free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
-            cov = np.zeros((len(x), len(x)))
-            try:
-                cov[np.ix_(free, free)] = np.linalg.inv(normal[np.ix_(free, free)])
-            except np.linalg.LinAlgError:
-                cov[:] = np.inf
+            if self.core is not None:
+                cov = np.empty((len(x), len(x)))
+                if not self.core.inverse_free(normal, free.tolist(), cov):
+                    cov[:] = np.inf
+            else:
+                cov = np.zeros((len(x), len(x)))
+                try:
+                    cov[np.ix_(free, free)] = np.linalg.inv(normal[np.ix_(free, free)])
+                except np.linalg.LinAlgError:
+                    cov[:] = np.inf
             self._cov_unit = cov
         args = (wheel_mu.tolist(), wheel_lam.tolist(), self._slip_support.tolist(), self._slip_floor.tolist(),
                 o.peak_extrapolation, o.extrapolation_max_slip, thetas.tolist(), v_eval)

@@ -280,3 +280,36 @@ def test_compiled_peak_report_matches_numpy():
         for flag in c[2]:
             capped_seen[flag] += 1
     assert capped_seen[True] > 50 and capped_seen[False] > 50
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_compiled_weights_bias_and_covariance_match_numpy():
+    rng = np.random.default_rng(9)
+    times = np.sort(rng.uniform(0.0, 0.8, 300))
+    weights, sw = np.empty(300), np.empty(300)
+    core.weights(times, 0.75, 0.4, 0.02, weights, sw)   # (the newest samples lie after `now`: weight 1)
+    np.testing.assert_allclose(weights, np.exp(np.minimum(times - 0.75, 0.0) / 0.4), rtol=1e-15)
+    np.testing.assert_allclose(sw, np.sqrt(weights) / 0.02, rtol=1e-15)
+    r = rng.normal(0.3, 1.0, 300)
+    mean, rms, same_sign = core.residual_bias(r, weights, 250, 0.02)
+    resid = r[250:] * 0.02 / np.sqrt(weights[250:])
+    assert mean == pytest.approx(resid.mean(), rel=1e-12)
+    assert rms == pytest.approx(resid.std(), rel=1e-12)
+    assert same_sign == pytest.approx(abs(np.sign(resid).mean()), rel=1e-12)
+    with pytest.raises(ValueError, match="first"):
+        core.residual_bias(r, weights, 300, 0.02)
+    a = rng.normal(size=(7, 9))
+    normal = a @ a.T
+    for free in ([True] * 7, [True, False, True, True, False, True, True], [False] * 7):
+        out = np.full((7, 7), 5.0)
+        assert core.inverse_free(normal, free, out) is True
+        expected = np.zeros((7, 7))
+        f = np.array(free)
+        if f.any():
+            expected[np.ix_(f, f)] = np.linalg.inv(normal[np.ix_(f, f)])
+        np.testing.assert_allclose(out, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max(initial=1.0))
+    out = np.full((7, 7), 5.0)
+    rank_deficient = np.zeros((7, 7))
+    rank_deficient[:2, :2] = 1.0   # exactly singular: the same row twice
+    assert core.inverse_free(rank_deficient, [True, True] + [False] * 5, out) is False
+    assert (out == 5.0).all()    # untouched: the caller marks the covariance infinite

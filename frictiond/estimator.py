@@ -247,11 +247,14 @@ def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: l
             tuple(wheel_std))
 
 
+_WHEEL_COLUMN = np.arange(N_WHEELS)[:, None]
+
+
 class _Window:
     """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append.
 
     Next to each sample it keeps the parts of the model that depend on the sample alone (with
-    the held α and L): λ·v, (λ·v)^α, L·λ/(1−λ) and the wheel as a one-hot column; and, in
+    the held α and L): λ·v, (λ·v)^α and L·λ/(1−λ); and, in
     `rows`, the unweighted Jacobian row and model − measurement of each sample at the
     parameters of the last accepted fit (valid for the samples before `cached_end`).
     """
@@ -268,7 +271,6 @@ class _Window:
         self.lam_v = np.empty(capacity)
         self.pow_lam_v = np.empty(capacity)
         self.stiff = np.empty(capacity)
-        self.onehot = np.zeros((N_WHEELS, capacity))
         self.rows = np.empty((N_WHEELS + len(SHARED) + 1, capacity))
         self.start = 0
         self.end = 0
@@ -293,7 +295,6 @@ class _Window:
             s, e = self.start, self.end
             for arr in (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v, self.stiff):
                 arr[:n] = arr[s:e]
-            self.onehot[:, :n] = self.onehot[:, s:e]
             self.rows[:, :n] = self.rows[:, s:e]
             self.cached_end = max(self.cached_end - s, 0)
             self.start, self.end = 0, n
@@ -306,8 +307,6 @@ class _Window:
         self.lam_v[k] = lam_v
         self.pow_lam_v[k] = lam_v**self.alpha if lam_v > 0 else 0.0
         self.stiff[k] = self.patch_length * lam / (1.0 - lam)
-        self.onehot[:, k] = 0.0
-        self.onehot[wheel, k] = 1.0
         self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
         self.end += 1
 
@@ -394,7 +393,7 @@ class LugreTrustRegionEstimator:
         self.excitation_reasons = ["", "", "", ""]
         self._innovation_score = 0.0
         self._last_jump_s = -math.inf
-        self._last_peak_slips: np.ndarray | None = None
+        self._last_peak_slips: list[float] | None = None
         self._slip_support: np.ndarray | None = None
         self._capped: np.ndarray | None = None
         self._slip_floor = np.zeros(N_WHEELS)
@@ -612,6 +611,7 @@ class LugreTrustRegionEstimator:
         sigma0, v_s, sigma2 = float(x[4]) * sc4, float(x[5]) * sc5, float(x[6]) * sc6
         thetas = self._thetas(x)
         wheel = w.wheel[lo:hi]
+        onehot = wheel == _WHEEL_COLUMN    # (N_WHEELS, hi − lo): the ln θ column of each sample
         alpha = self._alpha
         dmu = b.mu_s - b.mu_c
         ratio = w.pow_lam_v[lo:hi] * v_s**-alpha
@@ -626,7 +626,7 @@ class LugreTrustRegionEstimator:
             partials = np.empty((hi - lo, 4))
             model = braking_mu_and_partials(w.slip[lo:hi], w.speed[lo:hi], thetas[wheel], self._params(x), partials)
             partials[:, 0] *= thetas[wheel]     # ∂/∂ln θ
-            np.multiply(w.onehot[:, lo:hi], partials[:, 0], out=out[:N_WHEELS])
+            np.multiply(onehot, partials[:, 0], out=out[:N_WHEELS])
             out[4] = partials[:, 1] * sc4
             out[5] = partials[:, 2] * sc5
             out[6] = partials[:, 3] * sc6
@@ -642,7 +642,7 @@ class LugreTrustRegionEstimator:
         FmZ = F - ZdF
         gt = g * inv_t
         a0 = gt * FmZ                   # −∂μ/∂ln θ = (g/θ)(F − Z·F')
-        np.multiply(w.onehot[:, lo:hi], a0, out=out[:N_WHEELS])
+        np.multiply(onehot, a0, out=out[:N_WHEELS])
         out[:N_WHEELS] *= -1.0
         np.multiply(gt, ZdF, out=out[4])
         out[4] *= sc4 / sigma0
@@ -793,7 +793,17 @@ class LugreTrustRegionEstimator:
         p = self._params(x)
         thetas = self._thetas(x)
         v_eval = max(speed, 1.0)
-        wheel_mu, wheel_lam = peaks(v_eval, p, thetas, near=self._last_peak_slips)
+        near = self._last_peak_slips
+        theta_list = thetas.tolist()
+        found = None
+        if self.core is not None and near is not None:
+            found = self.core.peaks_near(v_eval, theta_list, near, (p.mu_c, p.mu_s - p.mu_c, p.alpha,
+                                                                    p.sigma0 * p.patch_length, p.v_s, p.sigma2))
+            near = None   # (tried: what is left is the grid search)
+        if found is None:
+            grid_mu, grid_lam = peaks(v_eval, p, thetas, near=near)
+            found = (grid_mu.tolist(), grid_lam.tolist())
+        wheel_mu, wheel_lam = found
         self._last_peak_slips = wheel_lam
         if self._due(0) or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(weights)
@@ -818,8 +828,8 @@ class LugreTrustRegionEstimator:
                 except np.linalg.LinAlgError:
                     cov[:] = np.inf
             self._cov_unit = cov
-        args = (wheel_mu.tolist(), wheel_lam.tolist(), self._slip_support.tolist(), self._slip_floor.tolist(),
-                o.peak_extrapolation, o.extrapolation_max_slip, thetas.tolist(), v_eval)
+        args = (wheel_mu, wheel_lam, self._slip_support.tolist(), self._slip_floor.tolist(),
+                o.peak_extrapolation, o.extrapolation_max_slip, theta_list, v_eval)
         tail = (self._shared_scale, self._cov_unit, variance_factor, self._load_share)
         if self.core is not None:
             numbers = self.core.peak_report(*args, (p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0,
@@ -833,7 +843,7 @@ class LugreTrustRegionEstimator:
             self._excitation_cache = self._excitation(weights, wheel_mu, wheel_lam, v_eval)
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
-        theta_mean = sum(thetas.tolist()) / N_WHEELS
+        theta_mean = sum(theta_list) / N_WHEELS
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
                   "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
                   "jumps": float(self._jumps)}

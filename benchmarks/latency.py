@@ -53,6 +53,9 @@ def main(argv=None) -> int:
     parser.add_argument("--pace", type=float, default=1.0, help="playback speed (1 = real time)")
     args = parser.parse_args(argv)
     config = default_config()
+    # Simulated before the daemon starts (and freezes what exists, `Daemon._serve`): the sender
+    # then only sends, and its allocations do not set off collections inside the daemon's thread.
+    drives = [simulate_frames(config, name, seed=k)[0] for k, name in enumerate(args.scenarios.split(","))]
     channel = f"frictiond-bench-{uuid.uuid4().hex[:8]}"
     daemon = TimedDaemon(config, overrides=Overrides(interface="virtual", channel=channel), install_signals=False)
     thread = threading.Thread(target=daemon.run, daemon=True)
@@ -60,8 +63,7 @@ def main(argv=None) -> int:
     daemon.running.wait(10)
     vehicle = open_bus("virtual", channel, None, preserve_timestamps=True)
     try:
-        for k, name in enumerate(args.scenarios.split(",")):
-            frames, _ = simulate_frames(config, name, seed=k)
+        for frames in drives:
             base, start = frames[0].time_s, time.perf_counter()
             for f in frames:
                 delay = (f.time_s - base) / args.pace - (time.perf_counter() - start)

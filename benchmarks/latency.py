@@ -3,7 +3,9 @@ frames handed to the bus, for `frictiond run`'s Daemon on python-can's virtual b
 
 Simulated ABS stops are played onto the bus at real-time pace (so the loop is idle between
 frames as on a car), and every trigger frame's handling time is recorded. As a floor, the same
-measurement for a loop that only decodes the frame with the codec.
+measurement for a loop that only decodes the frame with the codec. In the same run: the same
+frames through a Pipeline back to back (the work without the idle gaps and the bus), and how much
+slower this machine runs a fixed workload right after sleeping than back to back.
 
     python benchmarks/latency.py [--scenarios dry,wet,snow] [--pace 1.0]
 """
@@ -22,6 +24,7 @@ from _common import default_config, percentile  # noqa: E402
 
 from frictiond.busio import frame_to_message, open_bus  # noqa: E402
 from frictiond.daemon import Daemon, Overrides  # noqa: E402
+from frictiond.pipeline import Pipeline  # noqa: E402
 from frictiond.sim_frames import simulate_frames  # noqa: E402
 
 
@@ -47,6 +50,46 @@ class TimedDaemon(Daemon):
         self.decode_only.append(time.perf_counter() - t0)
 
 
+def _reference_work() -> float:
+    """A fixed piece of pure-Python arithmetic (~0.3 ms): the machine's yardstick."""
+    total = 0.0
+    for i in range(3000):
+        total += (i * 0.5) ** 0.5
+    return total
+
+
+def idle_penalty(period_s: float, runs: int = 300) -> tuple[float, float]:
+    """How much slower the reference work runs right after the process slept for most of a bus
+    period than back to back (median ratio, p99 ratio): a property of the machine (idle CPUs
+    clock down and lose their caches), not of frictiond, which the daemon's latency pays too."""
+    timings = {}
+    for idle in (False, True):
+        ts = []
+        for _ in range(runs):
+            if idle:
+                time.sleep(period_s * 0.9)
+            t0 = time.perf_counter()
+            _reference_work()
+            ts.append(time.perf_counter() - t0)
+        timings[idle] = ts
+    return (statistics.median(timings[True]) / statistics.median(timings[False]),
+            percentile(timings[True], 99) / percentile(timings[False], 99))
+
+
+def back_to_back(config, drives) -> list[float]:
+    """The pipeline's handling of each trigger frame of the same drives, back to back (µs)."""
+    pipeline = Pipeline(config)
+    trigger = pipeline.input_codec.trigger_id
+    times = []
+    for frames in drives:
+        for f in frames:
+            t0 = time.perf_counter()
+            pipeline.process(f)
+            if f.can_id == trigger:
+                times.append((time.perf_counter() - t0) * 1e6)
+    return times
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenarios", default="dry,wet,snow")
@@ -56,6 +99,8 @@ def main(argv=None) -> int:
     # Simulated before the daemon starts (and freezes what exists, `Daemon._serve`): the sender
     # then only sends, and its allocations do not set off collections inside the daemon's thread.
     drives = [simulate_frames(config, name, seed=k)[0] for k, name in enumerate(args.scenarios.split(","))]
+    warm = back_to_back(config, drives)
+    penalty = idle_penalty(0.01 / args.pace)
     channel = f"frictiond-bench-{uuid.uuid4().hex[:8]}"
     daemon = TimedDaemon(config, overrides=Overrides(interface="virtual", channel=channel), install_signals=False)
     thread = threading.Thread(target=daemon.run, daemon=True)
@@ -83,6 +128,10 @@ def main(argv=None) -> int:
     print(f"floor (decode only):    median {statistics.median(dec):7.1f} µs  p99 {percentile(dec, 99):7.1f} µs")
     print(f"ratio median latency / decode: {statistics.median(lat) / statistics.median(dec):.1f}x; "
           f"p99 is {percentile(lat, 99) / 10_000 * 100:.1f} % of the 10 ms bus period")
+    print(f"same trigger frames back to back (Pipeline.process, no bus): median {statistics.median(warm):7.1f} µs  "
+          f"p99 {percentile(warm, 99):7.1f} µs")
+    print(f"this machine after sleeping between frames: a fixed workload runs {penalty[0]:.2f}x slower "
+          f"(median), {penalty[1]:.2f}x (p99) than back to back")
     return 0
 
 

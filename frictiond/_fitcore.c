@@ -613,6 +613,90 @@ static PyObject *py_peaks_near(PyObject *self, PyObject *args)
     return Py_BuildValue("(NN)", a, b);
 }
 
+/* tyre_model._mu_grid at one point (same order of operations). */
+static double mu_grid_one(double lam, double v, double theta, double mu_c, double dmu, double alpha, double theta_k,
+                          double v_s, double sigma2)
+{
+    const double g = mu_c + dmu * exp(-pow(lam * (v / v_s), alpha));
+    double Z = (theta * theta_k) * lam / (g * (1.0 - lam));
+    if (!(Z >= SMALL_Z))
+        Z = Z != Z ? Z : SMALL_Z;   /* np.maximum: NaN stays NaN */
+    return (g / theta) * (1.0 + expm1(-Z) / Z) + (sigma2 * v) * lam;
+}
+
+/* tyre_model.peaks without `near`: the first local maximum on the coarse slip grid, a fine grid
+ * around it, and a parabola through the best fine point and its neighbours. */
+static PyObject *py_peaks_grid(PyObject *self, PyObject *args)
+{
+    (void)self;
+    double v, mu_c, dmu, alpha, theta_k, v_s, sigma2, thetas[MAX_POINTS];
+    PyObject *theta_obj, *o_grid, *o_fine;
+    if (!PyArg_ParseTuple(args, "dOOO(dddddd):peaks_grid", &v, &theta_obj, &o_grid, &o_fine, &mu_c, &dmu, &alpha,
+                          &theta_k, &v_s, &sigma2))
+        return NULL;
+    const Py_ssize_t n = floats(theta_obj, thetas, "thetas");
+    if (n < 0)
+        return NULL;
+    Buf b[2];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    if (get_array(o_grid, &b[0], "grid", -1, 0, 0) < 0 || get_array(o_fine, &b[1], "fine", -1, 0, 0) < 0)
+        goto out;
+    const double *grid = b[0].view.buf, *fine_rel = b[1].view.buf;
+    const Py_ssize_t ng = b[0].view.len / 8, nf = b[1].view.len / 8;
+    if (ng < 3 || nf < 3 || ng > 256 || nf > 256) {
+        PyErr_SetString(PyExc_ValueError, "grid and fine: 3 to 256 points");
+        goto out;
+    }
+    double mus[MAX_POINTS], lams[MAX_POINTS], values[256], fine[256], fv[256];
+    for (Py_ssize_t w = 0; w < n; w++) {
+        const double th = thetas[w];
+        for (Py_ssize_t k = 0; k < ng; k++)
+            values[k] = mu_grid_one(grid[k], v, th, mu_c, dmu, alpha, theta_k, v_s, sigma2);
+        /* The tyre's peak is the first local maximum (np.argmax of the first fall). */
+        Py_ssize_t i = ng - 1;
+        for (Py_ssize_t k = 0; k + 1 < ng; k++)
+            if (values[k + 1] - values[k] < 0) {
+                i = k;
+                break;
+            }
+        const double lo = grid[i > 0 ? i - 1 : 0], hi = grid[i + 1 < ng ? i + 1 : ng - 1], centre = grid[i];
+        const double half = fmax(centre - lo, hi - centre);
+        Py_ssize_t j = 0;
+        for (Py_ssize_t k = 0; k < nf; k++) {
+            fine[k] = fmin(fmax(centre + half * fine_rel[k], 1e-4), MAX_MODEL_SLIP);
+            fv[k] = mu_grid_one(fine[k], v, th, mu_c, dmu, alpha, theta_k, v_s, sigma2);
+            if (fv[j] == fv[j] && (fv[k] != fv[k] || fv[k] > fv[j]))
+                j = k;   /* np.argmax: the first maximum, a NaN counting as one */
+        }
+        /* _refine */
+        if (j < 1)
+            j = 1;
+        if (j > nf - 2)
+            j = nf - 2;
+        const double y0 = fv[j - 1], y1 = fv[j], y2 = fv[j + 1], x1 = fine[j], h = fine[j + 1] - x1;
+        const double denom = y0 - 2 * y1 + y2;
+        double shift = denom < 0 ? 0.5 * (y0 - y2) / denom : 0.0;
+        shift = fmin(fmax(shift, -1.0), 1.0);
+        const double lam_star = fmin(fmax(x1 + shift * h, 1e-4), MAX_MODEL_SLIP);
+        const double mu_star = mu_grid_one(lam_star, v, th, mu_c, dmu, alpha, theta_k, v_s, sigma2);
+        mus[w] = mu_star != mu_star || y1 != y1 ? NAN : fmax(mu_star, y1);
+        lams[w] = lam_star;
+    }
+    {
+        PyObject *a = tuple_of(mus, n), *c = a ? tuple_of(lams, n) : NULL;
+        if (c)
+            result = Py_BuildValue("(NN)", a, c);
+        else
+            Py_XDECREF(a);
+    }
+out:
+    for (int i = 0; i < 2; i++)
+        if (b[i].held)
+            PyBuffer_Release(&b[i].view);
+    return result;
+}
+
 /* tyre_model.braking_mu_and_partials_few: μ and ∂μ/∂(θ, σ0, v_s, σ2) at (λ_i, θ_i), one speed. */
 static PyObject *py_mu_partials_few(PyObject *self, PyObject *args)
 {
@@ -1096,6 +1180,9 @@ static PyMethodDef methods[] = {
     {"peaks_near", py_peaks_near, METH_VARARGS,
      "peaks_near(v, thetas, near, (mu_c, dmu, alpha, sigma0*L, v_s, sigma2)) -> (mus, lams) | None\n\n"
      "tyre_model._peaks_near for up to 16 wheels."},
+    {"peaks_grid", py_peaks_grid, METH_VARARGS,
+     "peaks_grid(v, thetas, grid, fine, (mu_c, dmu, alpha, sigma0*L, v_s, sigma2)) -> (mus, lams)\n\n"
+     "tyre_model.peaks without `near` (the grid search) for up to 16 values of theta."},
     {"mu_partials_few", py_mu_partials_few, METH_VARARGS,
      "mu_partials_few(lams, v, thetas, (mu_c, dmu, alpha, sigma0, sigma0*L, v_s, sigma2)) -> (mus, rows)\n\n"
      "tyre_model.braking_mu_and_partials_few; rows flat, 4 per point."},

@@ -252,7 +252,12 @@ def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarr
         found = _peaks_near(v, p, thetas, near)
         if found is not None:
             return found
-    thetas = np.atleast_1d(np.asarray(thetas, dtype=float))[:, None]
+    thetas = np.atleast_1d(np.asarray(thetas, dtype=float))
+    if _compiled is not None and thetas.ndim == 1 and len(thetas) <= 16:
+        mus, lams = _compiled.peaks_grid(v, thetas.tolist(), _PEAK_GRID, _FINE, (
+            p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0 * p.patch_length, p.v_s, p.sigma2))
+        return np.array(mus), np.array(lams)
+    thetas = thetas[:, None]
     grid = _PEAK_GRID[None, :]
     values = _mu_grid(grid, v, thetas, p)
     # The tyre's peak is the first local maximum: with a large viscous term σ2·λ·v the curve

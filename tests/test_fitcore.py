@@ -313,3 +313,21 @@ def test_compiled_weights_bias_and_covariance_match_numpy():
     rank_deficient[:2, :2] = 1.0   # exactly singular: the same row twice
     assert core.inverse_free(rank_deficient, [True, True] + [False] * 5, out) is False
     assert (out == 5.0).all()    # untouched: the caller marks the covariance infinite
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_compiled_grid_peak_search_matches_numpy(monkeypatch):
+    rng = np.random.default_rng(3)
+    cases = []
+    for _ in range(300):
+        p = tm.LugreParams(sigma0=float(rng.uniform(60, 600)), v_s=float(rng.uniform(1, 15)),
+                           sigma2=float(rng.uniform(0, 0.05)))   # (large σ2: curves that climb again)
+        cases.append((p, np.exp(rng.uniform(np.log(0.8), np.log(60), 4)), float(rng.uniform(0.5, 40))))
+    compiled = [tm.peaks(v, p, th) for p, th, v in cases]
+    monkeypatch.setattr(tm, "_compiled", None)
+    for (p, th, v), (c_mu, c_lam) in zip(cases, compiled):
+        mu, lam = tm.peaks(v, p, th)
+        np.testing.assert_allclose(c_mu, mu, rtol=1e-12)
+        np.testing.assert_allclose(c_lam, lam, rtol=1e-12)
+    with pytest.raises(ValueError, match="grid"):
+        core.peaks_grid(10.0, [1.0], np.array([0.1, 0.2]), tm._FINE, (0.8, 0.75, 0.5, 36.0, 6.0, 0.002))

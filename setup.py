@@ -1,8 +1,12 @@
-"""Build of the one compiled module; everything else is in pyproject.toml.
+"""Build of the compiled modules; everything else is in pyproject.toml.
 
-`frictiond._fitcore` (the estimator's per-update fit in C) is optional: without a C compiler the
-install still succeeds and the estimator runs the same fit in numpy, several times slower.
+`frictiond._fitcore` (the estimator's per-update numerics) and `frictiond._frontcore` (the front
+end's derivative filter) are optional: without a C compiler the install still succeeds and the
+same computations run in numpy and plain Python, several times slower.
 """
 from setuptools import Extension, setup
 
-setup(ext_modules=[Extension("frictiond._fitcore", ["frictiond/_fitcore.c"], optional=True)])
+setup(ext_modules=[
+    Extension("frictiond._fitcore", ["frictiond/_fitcore.c"], optional=True),
+    Extension("frictiond._frontcore", ["frictiond/_frontcore.c"], optional=True),
+])

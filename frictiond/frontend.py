@@ -26,6 +26,13 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+try:
+    # The derivative filter's fit compiled (setup.py builds it when a C compiler is there); the
+    # float code of `_fit_wheels` below is the fallback and the reference (tests compare).
+    from . import _frontcore as compiled_front
+except ImportError:  # pragma: no cover - depends on the install
+    compiled_front = None
+
 from .samples import PhysicalSample
 from .vehicle import GRAVITY_MPS2, VehicleParams
 
@@ -170,6 +177,8 @@ class FrontEnd:
         options.validate()
         self.vehicle = vehicle
         self.options = options
+        # The compiled derivative filter when installed; `None` runs the float code (tests compare).
+        self.core = compiled_front
         self.trigger_message = trigger_message
         self._signal_message: dict[str, str] = {}
         for message, names in message_signals.items():
@@ -333,6 +342,13 @@ class FrontEnd:
         in the time offset scaled to [−1, 1], so they stay well conditioned): a handful of points
         and four wheels are far too small for numpy's per-call overhead.
         """
+        if self.core is not None:
+            fitted = self.core.fit_wheels(self._wheel_times, self._wheel_speeds, self.options.spike_threshold)
+            if fitted is None:
+                self._torque_weights = None
+                return self._fit_wheels_numpy()
+            t_c, omega, omega_dot, glitch, self._torque_weights = fitted
+            return t_c, omega, omega_dot, glitch
         times = self._wheel_times
         n = len(times)
         t_c = float(times[n // 2])
@@ -422,6 +438,8 @@ class FrontEnd:
         if pair is None:
             return fallback if floor is None else max(0.0, fallback - floor)
         ts, vs = pair
+        if self.core is not None:
+            return self.core.matched(ts, vs, self._wheel_times, self._torque_weights, floor)
         key = (len(ts), ts[0], ts[-1])
         plan = plans.get(key)
         if plan is None:

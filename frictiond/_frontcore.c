@@ -1,0 +1,285 @@
+/*
+ * frictiond._frontcore: the front end's per-sample numerics, compiled.
+ *
+ * `FrontEnd._fit_wheels` (the derivative filter: a local quadratic fit of the four wheel
+ * speeds over the window, its glitch test and the torque weights matched to it) and the
+ * weighted sums of `FrontEnd._matched` (a signal interpolated at the window's times, weighted
+ * as the filter weights the wheel's acceleration). The Python code stays the reference and
+ * the fallback where no compiler was available at install (tests compare the two).
+ * Pure numerics: nothing of CAN, nothing of the tyre model.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+#define NW 4
+
+/* A sequence of floats into a new buffer (PyMem); *n gets the length. NULL with an exception. */
+static double *floats_of(PyObject *obj, Py_ssize_t *n, const char *name)
+{
+    PyObject *seq = PySequence_Fast(obj, name);
+    if (!seq)
+        return NULL;
+    *n = PySequence_Fast_GET_SIZE(seq);
+    double *out = PyMem_Malloc((size_t)(*n + 1) * sizeof(double));
+    if (!out) {
+        Py_DECREF(seq);
+        PyErr_NoMemory();
+        return NULL;
+    }
+    for (Py_ssize_t i = 0; i < *n; i++) {
+        out[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, i));
+        if (out[i] == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(seq);
+            PyMem_Free(out);
+            return NULL;
+        }
+    }
+    Py_DECREF(seq);
+    return out;
+}
+
+static PyObject *tuple_of(const double *v, Py_ssize_t n)
+{
+    PyObject *t = PyTuple_New(n);
+    if (!t)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *f = PyFloat_FromDouble(v[i]);
+        if (!f) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, f);
+    }
+    return t;
+}
+
+/* fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights)
+ * or None when the timestamps are too degenerate for the closed form (the caller then uses
+ * least squares). `speeds`: one 4-sequence per time. */
+static PyObject *py_fit_wheels(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_times, *o_speeds;
+    double threshold;
+    if (!PyArg_ParseTuple(args, "OOd:fit_wheels", &o_times, &o_speeds, &threshold))
+        return NULL;
+    Py_ssize_t n;
+    double *times = floats_of(o_times, &n, "times");
+    if (!times)
+        return NULL;
+    double *buf = PyMem_Malloc((size_t)(4 * (n + 1) + NW * (n + 1)) * sizeof(double));
+    PyObject *seq = NULL, *result = NULL;
+    if (!buf) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    double *u = buf, *u2 = buf + (n + 1), *c = buf + 2 * (n + 1), *interval = buf + 3 * (n + 1);
+    double *y = buf + 4 * (n + 1);   /* y[w * (n + 1) + k] */
+    seq = PySequence_Fast(o_speeds, "speeds");
+    if (!seq)
+        goto out;
+    if (PySequence_Fast_GET_SIZE(seq) != n || n < 1) {
+        PyErr_SetString(PyExc_ValueError, "speeds: one row of four per time (and at least one)");
+        goto out;
+    }
+    for (Py_ssize_t k = 0; k < n; k++) {
+        PyObject *row = PySequence_Fast(PySequence_Fast_GET_ITEM(seq, k), "speeds row");
+        if (!row)
+            goto out;
+        if (PySequence_Fast_GET_SIZE(row) != NW) {
+            Py_DECREF(row);
+            PyErr_SetString(PyExc_ValueError, "speeds: four wheels per row");
+            goto out;
+        }
+        for (int w = 0; w < NW; w++) {
+            const double v = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(row, w));
+            if (v == -1.0 && PyErr_Occurred()) {
+                Py_DECREF(row);
+                goto out;
+            }
+            y[w * (n + 1) + k] = v;
+        }
+        Py_DECREF(row);
+    }
+    const double t_c = times[n / 2];
+    double h = fmax(fabs(times[0] - t_c), fabs(times[n - 1] - t_c));
+    if (h == 0.0)
+        h = 1.0;
+    double s1 = 0, s2 = 0, s3 = 0, s4 = 0;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        u[k] = (times[k] - t_c) / h;
+        u2[k] = u[k] * u[k];
+    }
+    for (Py_ssize_t k = 0; k < n; k++)
+        s1 += u[k];
+    for (Py_ssize_t k = 0; k < n; k++)
+        s2 += u2[k];
+    for (Py_ssize_t k = 0; k < n; k++)
+        s3 += u[k] * u2[k];
+    for (Py_ssize_t k = 0; k < n; k++)
+        s4 += u2[k] * u2[k];
+    const double dn = (double)n;
+    /* Symmetric 3x3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate. */
+    const double c00 = s2 * s4 - s3 * s3, c01 = s2 * s3 - s1 * s4, c02 = s1 * s3 - s2 * s2;
+    const double c11 = dn * s4 - s2 * s2, c12 = s1 * s2 - dn * s3, c22 = dn * s2 - s1 * s1;
+    const double det = dn * c00 + s1 * c01 + s2 * c02;
+    if (!(det > 1e-9 * fmax(dn * s2 * s4, 1e-300))) {
+        result = Py_None;
+        Py_INCREF(result);
+        goto out;
+    }
+    const double inv = 1.0 / det;
+    int glitch = 0.0 > threshold;
+    double omega[NW], omega_dot[NW];
+    for (int w = 0; w < NW; w++) {
+        const double *yw = y + w * (n + 1);
+        double b0 = 0, b1 = 0, b2 = 0;
+        for (Py_ssize_t k = 0; k < n; k++)
+            b0 += yw[k];
+        for (Py_ssize_t k = 0; k < n; k++)
+            b1 += u[k] * yw[k];
+        for (Py_ssize_t k = 0; k < n; k++)
+            b2 += u2[k] * yw[k];
+        const double k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
+        const double k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv;
+        const double k2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv;
+        for (Py_ssize_t k = 0; k < n && !glitch; k++)
+            if (fabs(yw[k] - (k0 + k1 * u[k] + k2 * u2[k])) > threshold)
+                glitch = 1;
+        omega[w] = k0;
+        omega_dot[w] = k1 / h;
+    }
+    /* frontend._matched_weights with coef = (c01, c11, c12)·inv/h. */
+    const double q0 = c01 * inv / h, q1 = c11 * inv / h, q2 = c12 * inv / h;
+    for (Py_ssize_t k = 0; k < n; k++)
+        c[k] = q0 + q1 * u[k] + q2 * u[k] * u[k];
+    double tail = 0.0;
+    for (Py_ssize_t k = 0; k <= n; k++)
+        interval[k] = 0.0;
+    for (Py_ssize_t j = n - 1; j > 0; j--) {
+        tail += c[j];
+        interval[j] = tail * (times[j] - times[j - 1]);
+    }
+    for (Py_ssize_t k = 0; k < n; k++)
+        c[k] = 0.5 * (interval[k] + interval[k + 1]);
+    {
+        PyObject *a = tuple_of(omega, NW), *b = a ? tuple_of(omega_dot, NW) : NULL, *wt = b ? tuple_of(c, n) : NULL;
+        if (wt)
+            result = Py_BuildValue("(dNNON)", t_c, a, b, glitch ? Py_True : Py_False, wt);
+        else {
+            Py_XDECREF(a);
+            Py_XDECREF(b);
+        }
+    }
+out:
+    Py_XDECREF(seq);
+    PyMem_Free(buf);
+    PyMem_Free(times);
+    return result;
+}
+
+/* matched(ts, vs, times, weights, floor) -> Σ_k weights_k·x(times_k), x interpolated linearly
+ * in the series (ts, vs) and held beyond its ends, as FrontEnd._matched with
+ * frontend._interpolation_plan; with a floor, each series value v counts as max(0, v − floor). */
+static PyObject *py_matched(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_ts, *o_vs, *o_times, *o_w, *o_floor;
+    if (!PyArg_ParseTuple(args, "OOOOO:matched", &o_ts, &o_vs, &o_times, &o_w, &o_floor))
+        return NULL;
+    double floor_value = 0.0;
+    const int has_floor = o_floor != Py_None;
+    if (has_floor) {
+        floor_value = PyFloat_AsDouble(o_floor);
+        if (floor_value == -1.0 && PyErr_Occurred())
+            return NULL;
+    }
+    Py_ssize_t ns, nv, nt, nw;
+    double *ts = NULL, *vs = NULL, *times = NULL, *w = NULL, *coef = NULL;
+    Py_ssize_t *order = NULL;
+    PyObject *result = NULL;
+    if (!(ts = floats_of(o_ts, &ns, "ts")) || !(vs = floats_of(o_vs, &nv, "vs")) ||
+        !(times = floats_of(o_times, &nt, "times")) || !(w = floats_of(o_w, &nw, "weights")))
+        goto out;
+    if (ns != nv || ns < 1 || nt != nw) {
+        PyErr_SetString(PyExc_ValueError, "matched: ts and vs (non-empty), times and weights pairwise of one length");
+        goto out;
+    }
+    coef = PyMem_Calloc((size_t)ns, sizeof(double));
+    order = PyMem_Malloc((size_t)(ns + 1) * sizeof(Py_ssize_t));
+    char *seen = PyMem_Calloc((size_t)ns, 1);
+    if (!coef || !order || !seen) {
+        PyMem_Free(seen);
+        PyErr_NoMemory();
+        goto out;
+    }
+    Py_ssize_t n_order = 0;
+#define ADD(j_, a_)                           \
+    do {                                      \
+        if (!seen[j_]) {                      \
+            seen[j_] = 1;                     \
+            order[n_order++] = (j_);          \
+        }                                     \
+        coef[j_] += (a_);                     \
+    } while (0)
+    const Py_ssize_t last = ns - 1;
+    Py_ssize_t k = last;
+    for (Py_ssize_t i = nt - 1; i >= 0; i--) {   /* newest window time first, as the plan */
+        const double t = times[i], wt = w[i];
+        if (t >= ts[last]) {
+            ADD(last, wt);
+            continue;
+        }
+        while (k > 0 && ts[k - 1] > t)
+            k--;
+        if (k == 0) {
+            ADD(0, wt);
+            continue;
+        }
+        const double t0 = ts[k - 1], t1 = ts[k];
+        const double f = t1 > t0 ? (t - t0) / (t1 - t0) : 1.0;
+        ADD(k - 1, wt * (1.0 - f));
+        ADD(k, wt * f);
+    }
+#undef ADD
+    PyMem_Free(seen);
+    double total = 0.0;
+    for (Py_ssize_t i = 0; i < n_order; i++) {
+        const Py_ssize_t j = order[i];
+        if (!has_floor)
+            total += coef[j] * vs[j];
+        else if (vs[j] > floor_value)
+            total += coef[j] * (vs[j] - floor_value);
+    }
+    result = PyFloat_FromDouble(total);
+out:
+    PyMem_Free(ts);
+    PyMem_Free(vs);
+    PyMem_Free(times);
+    PyMem_Free(w);
+    PyMem_Free(coef);
+    PyMem_Free(order);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"fit_wheels", py_fit_wheels, METH_VARARGS,
+     "fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights) | None\n\n"
+     "FrontEnd._fit_wheels' closed-form quadratic fit; None for degenerate timestamps."},
+    {"matched", py_matched, METH_VARARGS,
+     "matched(ts, vs, times, weights, floor) -> float: FrontEnd._matched's weighted sum of a series\n"
+     "interpolated at the window's times (floor: None, or subtracted and clipped at 0 per value)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_frontcore",
+                                    "The front end's per-sample numerics, compiled.", -1, methods,
+                                    NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__frontcore(void)
+{
+    return PyModule_Create(&module);
+}

@@ -51,21 +51,9 @@ def _timed_pass(est, samples):
     return times, estimates, fitted, snapshots
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--limit", type=int, default=400, help="refit comparisons (default 400)")
-    args = parser.parse_args(argv)
-    config, samples = braking_samples()
-    if compiled_fit is None:
-        print("frictiond._fitcore is not built (no C compiler at install?): the compiled figures are missing")
-    # Pass 1: the estimator as installed; pass 2: the numpy path (what an install without a C
-    # compiler runs: fit, peaks and partials in numpy/floats); pass 3: the refits. Each pass runs
-    # back to back, so no pass runs with caches the others evicted.
+def _round(config, samples, limit: int) -> dict:
+    """One round: the estimator as installed, then on the numpy path, then the refits."""
     est = LugreTrustRegionEstimator(config.estimator.lugre_tr, config.vehicle)
-    # As the daemon does once started (`Daemon._serve`): what exists now stays out of the cyclic
-    # collector's full passes (here the simulated samples; a pass over them took ~30 ms).
-    gc.collect()
-    gc.freeze()
     update_times, estimates, fitted, snapshots = _timed_pass(est, samples)
     saved = tyre_model._compiled
     tyre_model._compiled = None
@@ -79,11 +67,9 @@ def main(argv=None) -> int:
     fitting = [k for k, f in enumerate(fitted) if f]
     braking_updates = [update_times[k] for k in fitting]
     numpy_fitting = [numpy_times[k] for k in fitting]
-    compared_updates = braking_updates[:args.limit]  # the estimator's own update on the refitted fits
+    compared_updates = braking_updates[:limit]  # the estimator's own update on the refitted fits
     ours_full, core_full, scipy_full, mu_diff, core_diff, upd_diff = [], [], [], [], [], []
-    fits = 0
-    for k, (sample, x_before, w) in enumerate(snapshots[:args.limit]):
-        fits += 1
+    for k, (sample, x_before, w) in enumerate(snapshots[:limit]):
         slip, speeds, mu, times, wheel = w["slip"], w["speed"], w["mu"], w["time"], w["wheel"]
         weights = est._weights(sample.time_s, times)
         sw = np.sqrt(weights) / est.options.measurement_std
@@ -119,6 +105,40 @@ def main(argv=None) -> int:
         x_after = snapshots[k + 1][1] if k + 1 < len(snapshots) else est._x
         mu_u = peaks(v, est._params(x_after), est._thetas(x_after))[0]
         upd_diff.append(float(np.max(np.abs(mu_u - mu_b))))
+    return {"update_times": update_times, "fitting": braking_updates, "numpy_fitting": numpy_fitting,
+            "compared": compared_updates, "ours_full": ours_full, "core_full": core_full,
+            "scipy_full": scipy_full, "mu_diff": mu_diff, "core_diff": core_diff, "upd_diff": upd_diff,
+            "path_diff": path_diff}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--limit", type=int, default=400, help="refit comparisons (default 400)")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds; each series' fastest is reported (default 3)")
+    args = parser.parse_args(argv)
+    config, samples = braking_samples()
+    if compiled_fit is None:
+        print("frictiond._fitcore is not built (no C compiler at install?): the compiled figures are missing")
+    # Pass 1: the estimator as installed; pass 2: the numpy path (what an install without a C
+    # compiler runs: fit, peaks and partials in numpy/floats); pass 3: the refits. Each pass runs
+    # back to back, so no pass runs with caches the others evicted.
+    # As the daemon does once started (`Daemon._serve`): what exists now stays out of the cyclic
+    # collector's full passes (here the simulated samples; a pass over them took ~30 ms).
+    gc.collect()
+    gc.freeze()
+    # This machine's speed drifts by tens of % over seconds: every series is measured in each of
+    # `--rounds` rounds and its fastest round (lowest median) is reported, as timeit takes the best.
+    rounds = [_round(config, samples, args.limit) for _ in range(max(1, args.rounds))]
+
+    def best(key: str) -> list[float]:
+        return min((r[key] for r in rounds), key=statistics.median)
+
+    first = rounds[0]
+    update_times, braking_updates, numpy_fitting = best("update_times"), best("fitting"), best("numpy_fitting")
+    compared_updates, ours_full, core_full, scipy_full = (best("compared"), best("ours_full"), best("core_full"),
+                                                          best("scipy_full"))
+    fits, path_diff = len(first["scipy_full"]), first["path_diff"]
+    mu_diff, core_diff, upd_diff = first["mu_diff"], first["core_diff"], first["upd_diff"]
     print(f"samples {len(samples)}, fits compared {fits}")
     print(f"estimator update (all)          {summary_us(update_times)}")
     print(f"estimator update (fitting)      {summary_us(braking_updates)}")

@@ -7,6 +7,6 @@ same computations run in numpy and plain Python, several times slower.
 from setuptools import Extension, setup
 
 setup(ext_modules=[
-    Extension("frictiond._fitcore", ["frictiond/_fitcore.c"], optional=True),
-    Extension("frictiond._frontcore", ["frictiond/_frontcore.c"], optional=True),
+    Extension("frictiond._fitcore", ["frictiond/_fitcore.c"], depends=["frictiond/_ccommon.h"], optional=True),
+    Extension("frictiond._frontcore", ["frictiond/_frontcore.c"], depends=["frictiond/_ccommon.h"], optional=True),
 ])

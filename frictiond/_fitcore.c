@@ -12,10 +12,8 @@
  * Arrays arrive through the buffer protocol (C-contiguous float64, the wheel index as intp),
  * so building needs no numpy headers. Pure numerics: nothing of CAN.
  */
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
+#include "_ccommon.h"
 #include <math.h>
-#include <string.h>
 
 #define NW 4            /* wheels: one ln θ each */
 #define NP 7            /* parameters: 4 ln θ, σ0, v_s, σ2 (scaled) */
@@ -414,33 +412,6 @@ done:
 
 /* ---------------------------------------------------------------------- Python binding */
 
-typedef struct {
-    Py_buffer view;
-    int held;
-} Buf;
-
-static int get_array(PyObject *obj, Buf *b, const char *name, Py_ssize_t count, int writable, int index)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, &b->view, flags) < 0)
-        return -1;
-    b->held = 1;
-    const char *f = b->view.format ? b->view.format : "B";
-    if (*f == '<' || *f == '=' || *f == '@')
-        f++;
-    const int ok = index ? (b->view.itemsize == (Py_ssize_t)sizeof(Py_ssize_t) && (*f == 'l' || *f == 'q' || *f == 'n'))
-                         : (b->view.itemsize == 8 && *f == 'd');
-    if (!ok) {
-        PyErr_Format(PyExc_TypeError, "%s: expected a contiguous %s array", name, index ? "intp" : "float64");
-        return -1;
-    }
-    if (count >= 0 && b->view.len / b->view.itemsize != count) {
-        PyErr_Format(PyExc_ValueError, "%s: expected %zd values, got %zd", name, count, b->view.len / b->view.itemsize);
-        return -1;
-    }
-    return 0;
-}
-
 #define NBUF 16
 
 static PyObject *py_solve(PyObject *self, PyObject *args)
@@ -503,55 +474,13 @@ static PyObject *py_solve(PyObject *self, PyObject *args)
     result = Py_BuildValue("(ddiOi)", o.cost, o.radius, o.iterations, o.converged ? Py_True : Py_False,
                            o.evaluations);
 out:
-    for (int i = 0; i < NBUF; i++)
-        if (b[i].held)
-            PyBuffer_Release(&b[i].view);
+    release_all(b, NBUF);
     return result;
 }
 
 /* ---------------------------------------------- peaks and partials at a handful of points */
 
 #define MAX_MODEL_SLIP 0.98   /* tyre_model.MAX_MODEL_SLIP */
-#define MAX_POINTS 16
-
-/* Up to MAX_POINTS floats from a sequence; returns the count or -1 with an exception. */
-static Py_ssize_t floats(PyObject *obj, double *out, const char *name)
-{
-    PyObject *seq = PySequence_Fast(obj, name);
-    if (!seq)
-        return -1;
-    const Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
-    if (n > MAX_POINTS) {
-        Py_DECREF(seq);
-        PyErr_Format(PyExc_ValueError, "%s: at most %d values", name, MAX_POINTS);
-        return -1;
-    }
-    for (Py_ssize_t i = 0; i < n; i++) {
-        out[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, i));
-        if (out[i] == -1.0 && PyErr_Occurred()) {
-            Py_DECREF(seq);
-            return -1;
-        }
-    }
-    Py_DECREF(seq);
-    return n;
-}
-
-static PyObject *tuple_of(const double *v, Py_ssize_t n)
-{
-    PyObject *t = PyTuple_New(n);
-    if (!t)
-        return NULL;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        PyObject *f = PyFloat_FromDouble(v[i]);
-        if (!f) {
-            Py_DECREF(t);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(t, i, f);
-    }
-    return t;
-}
 
 /* tyre_model._peaks_near: parabolic steps around each previous peak slip; None when some
  * peak is not bracketed (the caller then searches the grid). */
@@ -605,12 +534,7 @@ static PyObject *py_peaks_near(PyObject *self, PyObject *args)
         lams[i] = lam;
     }
 #undef MU_AT
-    PyObject *a = tuple_of(mus, n), *b = a ? tuple_of(lams, n) : NULL;
-    if (!b) {
-        Py_XDECREF(a);
-        return NULL;
-    }
-    return Py_BuildValue("(NN)", a, b);
+    return pair_of(mus, n, lams, n);
 }
 
 /* tyre_model._mu_grid at one point (same order of operations). */
@@ -683,18 +607,39 @@ static PyObject *py_peaks_grid(PyObject *self, PyObject *args)
         mus[w] = mu_star != mu_star || y1 != y1 ? NAN : fmax(mu_star, y1);
         lams[w] = lam_star;
     }
-    {
-        PyObject *a = tuple_of(mus, n), *c = a ? tuple_of(lams, n) : NULL;
-        if (c)
-            result = Py_BuildValue("(NN)", a, c);
-        else
-            Py_XDECREF(a);
-    }
+    result = pair_of(mus, n, lams, n);
 out:
-    for (int i = 0; i < 2; i++)
-        if (b[i].held)
-            PyBuffer_Release(&b[i].view);
+    release_all(b, 2);
     return result;
+}
+
+/* μ and the four partials at (λ, θ), one speed (tyre_model.braking_mu_and_partials_few for one
+ * point, same operations); c = (mu_c, dmu, alpha, sigma0, sigma0·L, v_s, sigma2). */
+static double mu_partials_one(double lam, double v, double theta, const double *c, double *row)
+{
+    const double mu_c = c[0], dmu = c[1], alpha = c[2], sigma0 = c[3], k = c[4], v_s = c[5], sigma2 = c[6];
+    lam = fmin(lam, MAX_MODEL_SLIP);
+    const double lam_v = lam * v;
+    const double ratio = lam_v >= 0 ? pow(lam_v * (1.0 / v_s), alpha) : NAN;
+    const double e = exp(-ratio), g = mu_c + dmu * e, inv_theta = 1.0 / theta;
+    const double Z = theta * k * lam / (g * (1.0 - lam));
+    double F, dF;
+    if (Z < SMALL_Z) {
+        F = Z / 2.0 - Z * Z / 6.0;
+        dF = 0.5 - Z / 3.0;
+    } else {
+        const double one_minus = -expm1(-Z), inv_Z = 1.0 / Z;
+        F = 1.0 - one_minus * inv_Z;
+        dF = (one_minus - Z * exp(-Z)) * inv_Z * inv_Z;
+    }
+    const double g_over_theta = g * inv_theta, ZdF = Z * dF;
+    if (row) {
+        row[0] = g_over_theta * inv_theta * (ZdF - F);
+        row[1] = g_over_theta * ZdF * (1.0 / sigma0);
+        row[2] = (F - ZdF) * inv_theta * dmu * e * (alpha / v_s) * ratio;
+        row[3] = lam_v;
+    }
+    return g_over_theta * F + sigma2 * lam_v;
 }
 
 /* tyre_model.braking_mu_and_partials_few: μ and ∂μ/∂(θ, σ0, v_s, σ2) at (λ_i, θ_i), one speed. */
@@ -714,36 +659,11 @@ static PyObject *py_mu_partials_few(PyObject *self, PyObject *args)
             PyErr_SetString(PyExc_ValueError, "lam and theta differ in length");
         return NULL;
     }
-    const double inv_v_s = 1.0 / v_s, inv_sigma0 = 1.0 / sigma0, c_v_s = alpha / v_s;
+    const double c[7] = {mu_c, dmu, alpha, sigma0, k, v_s, sigma2};
     double mus[MAX_POINTS], rows[4 * MAX_POINTS];
-    for (Py_ssize_t i = 0; i < n; i++) {
-        const double lam = fmin(lams[i], MAX_MODEL_SLIP), theta = thetas[i];
-        const double lam_v = lam * v;
-        const double ratio = lam_v >= 0 ? pow(lam_v * inv_v_s, alpha) : NAN;
-        const double e = exp(-ratio), g = mu_c + dmu * e, inv_theta = 1.0 / theta;
-        const double Z = theta * k * lam / (g * (1.0 - lam));
-        double F, dF;
-        if (Z < SMALL_Z) {
-            F = Z / 2.0 - Z * Z / 6.0;
-            dF = 0.5 - Z / 3.0;
-        } else {
-            const double one_minus = -expm1(-Z), inv_Z = 1.0 / Z;
-            F = 1.0 - one_minus * inv_Z;
-            dF = (one_minus - Z * exp(-Z)) * inv_Z * inv_Z;
-        }
-        const double g_over_theta = g * inv_theta, ZdF = Z * dF;
-        rows[4 * i] = g_over_theta * inv_theta * (ZdF - F);
-        rows[4 * i + 1] = g_over_theta * ZdF * inv_sigma0;
-        rows[4 * i + 2] = (F - ZdF) * inv_theta * dmu * e * c_v_s * ratio;
-        rows[4 * i + 3] = lam_v;
-        mus[i] = g_over_theta * F + sigma2 * lam_v;
-    }
-    PyObject *a = tuple_of(mus, n), *b = a ? tuple_of(rows, 4 * n) : NULL;
-    if (!b) {
-        Py_XDECREF(a);
-        return NULL;
-    }
-    return Py_BuildValue("(NN)", a, b);
+    for (Py_ssize_t i = 0; i < n; i++)
+        mus[i] = mu_partials_one(lams[i], v, thetas[i], c, rows + 4 * i);
+    return pair_of(mus, n, rows, 4 * n);
 }
 
 /* ------------------------------------------------------------ per-wheel statistics */
@@ -873,41 +793,11 @@ static PyObject *py_wheel_stats(PyObject *self, PyObject *args)
     }
 out:
     PyMem_Free(work);
-    for (int i = 0; i < 4; i++)
-        if (b[i].held)
-            PyBuffer_Release(&b[i].view);
+    release_all(b, 4);
     return result;
 }
 
 /* ------------------------------------------------------------- the reported peak */
-
-/* μ and the four partials at (λ, θ), one speed: braking_mu_and_partials_few for one point. */
-static double mu_partials_one(double lam, double v, double theta, const double *c, double *row)
-{
-    const double mu_c = c[0], dmu = c[1], alpha = c[2], sigma0 = c[3], k = c[4], v_s = c[5], sigma2 = c[6];
-    lam = fmin(lam, MAX_MODEL_SLIP);
-    const double lam_v = lam * v;
-    const double ratio = lam_v >= 0 ? pow(lam_v / v_s, alpha) : NAN;
-    const double e = exp(-ratio), g = mu_c + dmu * e, inv_theta = 1.0 / theta;
-    const double Z = theta * k * lam / (g * (1.0 - lam));
-    double F, dF;
-    if (Z < SMALL_Z) {
-        F = Z / 2.0 - Z * Z / 6.0;
-        dF = 0.5 - Z / 3.0;
-    } else {
-        const double one_minus = -expm1(-Z), inv_Z = 1.0 / Z;
-        F = 1.0 - one_minus * inv_Z;
-        dF = (one_minus - Z * exp(-Z)) * inv_Z * inv_Z;
-    }
-    const double g_over_theta = g * inv_theta, ZdF = Z * dF;
-    if (row) {
-        row[0] = g_over_theta * inv_theta * (ZdF - F);
-        row[1] = g_over_theta * ZdF / sigma0;
-        row[2] = (F - ZdF) * inv_theta * dmu * e * (alpha / v_s) * ratio;
-        row[3] = lam_v;
-    }
-    return g_over_theta * F + sigma2 * lam_v;
-}
 
 static double py_max0(double a) { return 0.0 > a ? 0.0 : a; }   /* Python's max(a, 0.0): NaN stays */
 
@@ -1048,9 +938,7 @@ static PyObject *py_weights(PyObject *self, PyObject *args)
     result = Py_None;
     Py_INCREF(result);
 out:
-    for (int i = 0; i < 3; i++)
-        if (b[i].held)
-            PyBuffer_Release(&b[i].view);
+    release_all(b, 3);
     return result;
 }
 
@@ -1092,9 +980,7 @@ static PyObject *py_residual_bias(PyObject *self, PyObject *args)
     }
     result = Py_BuildValue("(ddd)", mean, sqrt(dev2 / n), fabs(signs / n));
 out:
-    for (int i = 0; i < 2; i++)
-        if (b[i].held)
-            PyBuffer_Release(&b[i].view);
+    release_all(b, 2);
     return result;
 }
 
@@ -1164,9 +1050,7 @@ static PyObject *py_inverse_free(PyObject *self, PyObject *args)
     result = singular ? Py_False : Py_True;
     Py_INCREF(result);
 out:
-    for (int i = 0; i < 2; i++)
-        if (b[i].held)
-            PyBuffer_Release(&b[i].view);
+    release_all(b, 2);
     return result;
 }
 

@@ -8,53 +8,10 @@
  * the fallback where no compiler was available at install (tests compare the two).
  * Pure numerics: nothing of CAN, nothing of the tyre model.
  */
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
+#include "_ccommon.h"
 #include <math.h>
-#include <string.h>
 
 #define NW 4
-
-/* A sequence of floats into a new buffer (PyMem); *n gets the length. NULL with an exception. */
-static double *floats_of(PyObject *obj, Py_ssize_t *n, const char *name)
-{
-    PyObject *seq = PySequence_Fast(obj, name);
-    if (!seq)
-        return NULL;
-    *n = PySequence_Fast_GET_SIZE(seq);
-    double *out = PyMem_Malloc((size_t)(*n + 1) * sizeof(double));
-    if (!out) {
-        Py_DECREF(seq);
-        PyErr_NoMemory();
-        return NULL;
-    }
-    for (Py_ssize_t i = 0; i < *n; i++) {
-        out[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, i));
-        if (out[i] == -1.0 && PyErr_Occurred()) {
-            Py_DECREF(seq);
-            PyMem_Free(out);
-            return NULL;
-        }
-    }
-    Py_DECREF(seq);
-    return out;
-}
-
-static PyObject *tuple_of(const double *v, Py_ssize_t n)
-{
-    PyObject *t = PyTuple_New(n);
-    if (!t)
-        return NULL;
-    for (Py_ssize_t i = 0; i < n; i++) {
-        PyObject *f = PyFloat_FromDouble(v[i]);
-        if (!f) {
-            Py_DECREF(t);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(t, i, f);
-    }
-    return t;
-}
 
 /* fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights)
  * or None when the timestamps are too degenerate for the closed form (the caller then uses
@@ -108,19 +65,11 @@ static PyObject *py_fit_wheels(PyObject *self, PyObject *args)
     double h = fmax(fabs(times[0] - t_c), fabs(times[n - 1] - t_c));
     if (h == 0.0)
         h = 1.0;
-    double s1 = 0, s2 = 0, s3 = 0, s4 = 0;
     for (Py_ssize_t k = 0; k < n; k++) {
         u[k] = (times[k] - t_c) / h;
         u2[k] = u[k] * u[k];
     }
-    for (Py_ssize_t k = 0; k < n; k++)
-        s1 += u[k];
-    for (Py_ssize_t k = 0; k < n; k++)
-        s2 += u2[k];
-    for (Py_ssize_t k = 0; k < n; k++)
-        s3 += u[k] * u2[k];
-    for (Py_ssize_t k = 0; k < n; k++)
-        s4 += u2[k] * u2[k];
+    const double s1 = sum_of(u, n), s2 = sum_of(u2, n), s3 = dot_of(u, u2, n), s4 = dot_of(u2, u2, n);
     const double dn = (double)n;
     /* Symmetric 3x3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate. */
     const double c00 = s2 * s4 - s3 * s3, c01 = s2 * s3 - s1 * s4, c02 = s1 * s3 - s2 * s2;
@@ -136,13 +85,7 @@ static PyObject *py_fit_wheels(PyObject *self, PyObject *args)
     double omega[NW], omega_dot[NW];
     for (int w = 0; w < NW; w++) {
         const double *yw = y + w * (n + 1);
-        double b0 = 0, b1 = 0, b2 = 0;
-        for (Py_ssize_t k = 0; k < n; k++)
-            b0 += yw[k];
-        for (Py_ssize_t k = 0; k < n; k++)
-            b1 += u[k] * yw[k];
-        for (Py_ssize_t k = 0; k < n; k++)
-            b2 += u2[k] * yw[k];
+        const double b0 = sum_of(yw, n), b1 = dot_of(u, yw, n), b2 = dot_of(u2, yw, n);
         const double k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
         const double k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv;
         const double k2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv;

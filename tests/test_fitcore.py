@@ -22,6 +22,13 @@ def test_the_compiled_fit_is_built():
     assert core is not None, "frictiond._fitcore did not build: see the pip install output (gcc, python3-dev)"
 
 
+def random_peak_case(rng, sigma2_max: float = 0.01, v_min: float = 1.0):
+    """LuGre parameters, four wheels' θ from dry to polished ice, and a speed."""
+    p = tm.LugreParams(sigma0=float(rng.uniform(60, 600)), v_s=float(rng.uniform(1.0, 15.0)),
+                       sigma2=float(rng.uniform(0.0, sigma2_max)))
+    return p, np.exp(rng.uniform(np.log(0.8), np.log(60.0), 4)), float(rng.uniform(v_min, 40.0))
+
+
 def _window_problem(theta=2.0, seed=4, duration=0.6):
     p = tm.LugreParams(theta=theta, sigma0=230.0, v_s=5.0, sigma2=0.002)
     curve = lugre_curve(p)
@@ -178,10 +185,7 @@ def test_compiled_peaks_and_partials_match_the_float_code(monkeypatch):
     rng = np.random.default_rng(11)
     cases = []
     for _ in range(200):
-        p = tm.LugreParams(sigma0=float(rng.uniform(60, 600)), v_s=float(rng.uniform(1.0, 15.0)),
-                           sigma2=float(rng.uniform(0.0, 0.01)))
-        thetas = np.exp(rng.uniform(np.log(0.8), np.log(60.0), 4))
-        v = float(rng.uniform(1.0, 40.0))
+        p, thetas, v = random_peak_case(rng)
         lam = rng.uniform(1e-5, 0.99, 4)
         cases.append((p, thetas, v, lam))
     compiled = []
@@ -252,10 +256,7 @@ def test_compiled_peak_report_matches_numpy():
     rng = np.random.default_rng(5)
     capped_seen = {False: 0, True: 0}
     for k in range(300):
-        p = tm.LugreParams(sigma0=float(rng.uniform(60, 600)), v_s=float(rng.uniform(1.0, 15.0)),
-                           sigma2=float(rng.uniform(0.0, 0.01)))
-        thetas = np.exp(rng.uniform(np.log(0.8), np.log(60.0), 4))
-        v = float(rng.uniform(1.0, 40.0))
+        p, thetas, v = random_peak_case(rng)
         wheel_mu, wheel_lam = tm.peaks(v, p, thetas)
         support = rng.uniform(0.005, 0.3, 4)
         support[rng.random(4) < 0.2] = np.inf          # wheels without recent samples
@@ -320,9 +321,7 @@ def test_compiled_grid_peak_search_matches_numpy(monkeypatch):
     rng = np.random.default_rng(3)
     cases = []
     for _ in range(300):
-        p = tm.LugreParams(sigma0=float(rng.uniform(60, 600)), v_s=float(rng.uniform(1, 15)),
-                           sigma2=float(rng.uniform(0, 0.05)))   # (large σ2: curves that climb again)
-        cases.append((p, np.exp(rng.uniform(np.log(0.8), np.log(60), 4)), float(rng.uniform(0.5, 40))))
+        cases.append(random_peak_case(rng, sigma2_max=0.05, v_min=0.5))   # (large σ2: curves that climb again)
     compiled = [tm.peaks(v, p, th) for p, th, v in cases]
     monkeypatch.setattr(tm, "_compiled", None)
     for (p, th, v), (c_mu, c_lam) in zip(cases, compiled):

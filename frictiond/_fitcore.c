@@ -28,9 +28,13 @@ typedef struct {
     double mu_c, dmu, alpha, sc4, sc5, sc6;
 } Problem;
 
-/* 1/2 |r|^2, J^T r, J^T J at x; the weighted data residuals into r_data. Returns 0, or -1
- * for a non-finite model (the caller treats it like numpy's NaN). */
-static void evaluate(const Problem *p, const double *x, double *cost, double *g, double *N, double *r_data)
+#define ROW 5   /* a sample's unweighted row: ∂μ/∂ln θ_wheel, ∂μ/∂(σ0, v_s, σ2) scaled, μ_model − μ */
+
+/* 1/2 |r|^2, J^T r, J^T J at x; the weighted data residuals into r_data. The unweighted rows of
+ * the first `cached_n` samples are read from rows_in (computed at this x by an earlier call);
+ * the others are computed, and all are written to rows_out when it is given. */
+static void evaluate(const Problem *p, const double *x, double *cost, double *g, double *N, double *r_data,
+                     const double *rows_in, Py_ssize_t cached_n, double *rows_out)
 {
     double thetas[NW], inv_t[NW], Zk[NW];
     const double sigma0 = x[4] * p->sc4, v_s = x[5] * p->sc5, sigma2 = x[6] * p->sc6;
@@ -48,25 +52,34 @@ static void evaluate(const Problem *p, const double *x, double *cost, double *g,
     }
     for (Py_ssize_t j = 0; j < p->m; j++) {
         const int wi = (int)p->wheel[j];
-        const double ratio = p->pow_lam_v[j] * v_pow;
-        const double e = exp(-ratio);
-        const double gg = e * p->dmu + p->mu_c;
-        const double Z = Zk[wi] * p->stiff[j] / gg;
-        double F, ZdF;
-        if (Z < SMALL_Z) {
-            F = Z / 2.0 - Z * Z / 6.0;
-            ZdF = Z * (0.5 - Z / 3.0);
+        double u[ROW];
+        if (j < cached_n) {
+            memcpy(u, rows_in + ROW * j, sizeof u);
         } else {
-            const double om = -expm1(-Z), iz = 1.0 / Z;
-            F = 1.0 - om * iz;
-            ZdF = (om * (1.0 + Z) - Z) * iz;
+            const double ratio = p->pow_lam_v[j] * v_pow;
+            const double e = exp(-ratio);
+            const double gg = e * p->dmu + p->mu_c;
+            const double Z = Zk[wi] * p->stiff[j] / gg;
+            double F, ZdF;
+            if (Z < SMALL_Z) {
+                F = Z / 2.0 - Z * Z / 6.0;
+                ZdF = Z * (0.5 - Z / 3.0);
+            } else {
+                const double om = -expm1(-Z), iz = 1.0 / Z;
+                F = 1.0 - om * iz;
+                ZdF = (om * (1.0 + Z) - Z) * iz;
+            }
+            const double FmZ = F - ZdF, gt = gg * inv_t[wi], lv = p->lam_v[j];
+            u[0] = -(gt * FmZ);
+            u[1] = gt * ZdF * k4;
+            u[2] = FmZ * inv_t[wi] * e * ratio * k5;
+            u[3] = lv * p->sc6;
+            u[4] = gt * F + sigma2 * lv - p->mu[j];
         }
-        const double FmZ = F - ZdF, gt = gg * inv_t[wi], lv = p->lam_v[j], w = p->sw[j];
-        const double a = -(gt * FmZ) * w;
-        const double s0 = gt * ZdF * k4 * w;
-        const double s1 = FmZ * inv_t[wi] * e * ratio * k5 * w;
-        const double s2 = lv * p->sc6 * w;
-        const double r = (gt * F + sigma2 * lv - p->mu[j]) * w;
+        if (rows_out && j >= cached_n)   /* (with cached rows, rows_in is rows_out: those are there) */
+            memcpy(rows_out + ROW * j, u, sizeof u);
+        const double w = p->sw[j];
+        const double a = u[0] * w, s0 = u[1] * w, s1 = u[2] * w, s2 = u[3] * w, r = u[4] * w;
         r_data[j] = r;
         tt[wi] += a * a;
         ts[wi][0] += a * s0;
@@ -258,7 +271,8 @@ typedef struct {
 /* trust_region.solve_normal on `evaluate`: x in/out; g, N, r_data at the returned x. */
 static Outcome solve(const Problem *p, double *x, const double *lb, const double *ub, double radius,
                      int max_iterations, double ftol, double xtol, double gtol, int max_rejections,
-                     double predicted_ftol, double *g, double *N, double *r_data, double *r_trial)
+                     double predicted_ftol, double *g, double *N, double *r_data, double *r_trial,
+                     double *rows, const double *rows_x, Py_ssize_t cached_n, double *rows_trial)
 {
     double inner_lb[NP], inner_ub[NP];
     int fin_lb[NP], fin_ub[NP];
@@ -272,7 +286,12 @@ static Outcome solve(const Problem *p, double *x, const double *lb, const double
     }
     Outcome out = {0.0, radius, 0, 0, 1};
     double cost;
-    evaluate(p, x, &cost, g, N, r_data);
+    /* The row cache holds the rows at rows_x (the last call's result): usable only at that point. */
+    for (int i = 0; i < NP && cached_n > 0; i++)
+        if (x[i] != rows_x[i])
+            cached_n = 0;
+    evaluate(p, x, &cost, g, N, r_data, rows, rows ? cached_n : 0, rows);
+    double *rows_cur = rows, *rows_try = rows_trial;
     if (!isfinite(radius) || radius <= 0) {
         double s = 0.0;
         for (int i = 0; i < NP; i++) {
@@ -365,7 +384,7 @@ static Outcome solve(const Problem *p, double *x, const double *lb, const double
             }
             for (int i = 0; i < NP; i++)
                 x_new[i] = fmin(fmax(x[i] + s[i], inner_lb[i]), inner_ub[i]);
-            evaluate(p, x_new, &cost_new, g_new, N_new, r_try);
+            evaluate(p, x_new, &cost_new, g_new, N_new, r_try, NULL, 0, rows ? rows_try : NULL);
             out.evaluations++;
             actual = cost - cost_new;
             const double step_norm = norm(s_h);
@@ -394,6 +413,9 @@ static Outcome solve(const Problem *p, double *x, const double *lb, const double
         double *tmp = r_cur;
         r_cur = r_try;
         r_try = tmp;
+        tmp = rows_cur;
+        rows_cur = rows_try;
+        rows_try = tmp;
         const int small_cost = actual < ftol * cost;
         const int small_step = norm(s) < xtol * (xtol + x_norm);
         cost = cost_new;
@@ -405,6 +427,8 @@ static Outcome solve(const Problem *p, double *x, const double *lb, const double
 done:
     if (r_cur != r_data)
         memcpy(r_data, r_cur, p->m * sizeof(double));
+    if (rows && rows_cur != rows)
+        memcpy(rows, rows_cur, ROW * p->m * sizeof(double));
     out.cost = cost;
     out.radius = radius;
     return out;
@@ -420,18 +444,20 @@ static PyObject *py_solve(PyObject *self, PyObject *args)
     PyObject *objs[NBUF];
     double mu_c, dmu, alpha, sc4, sc5, sc6, radius, ftol, xtol, gtol, predicted_ftol;
     int max_iterations, max_rejections;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOO(dddddd)diddddi:solve",
+    PyObject *cache = Py_None;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOO(dddddd)diddddi|O:solve",
                           &objs[0], &objs[1], &objs[2], &objs[3], &objs[4], &objs[5], &objs[6], &objs[7],
                           &objs[8], &objs[9], &objs[10], &objs[11], &objs[12], &objs[13], &objs[14], &objs[15],
                           &mu_c, &dmu, &alpha, &sc4, &sc5, &sc6, &radius, &max_iterations, &ftol, &xtol,
-                          &gtol, &predicted_ftol, &max_rejections))
+                          &gtol, &predicted_ftol, &max_rejections, &cache))
         return NULL;
     static const char *names[NBUF] = {"pow_lam_v", "stiff", "lam_v", "mu", "wheel", "sw", "x", "lb", "ub",
                                       "prior", "inv_prior_std", "tie", "gradient", "normal", "r_data", "r_work"};
-    Buf b[NBUF];
+    Buf b[NBUF + 2];
     memset(b, 0, sizeof b);
     PyObject *result = NULL;
-    Py_ssize_t m = -1;
+    double *rows_trial = NULL;
+    Py_ssize_t m = -1, cached_n = 0;
     for (int i = 0; i < NBUF; i++) {
         Py_ssize_t count = -1;
         if (i >= 1 && i <= 5)
@@ -464,17 +490,37 @@ static PyObject *py_solve(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "bad solver settings");
         goto out;
     }
+    /* cache: (rows, rows_x, cached_n) — the window's unweighted rows (m x ROW, kept between
+     * calls), the point they were computed at, and how many leading samples are valid there. */
+    if (cache != Py_None) {
+        PyObject *o_rows, *o_x;
+        if (!PyArg_ParseTuple(cache, "OOn:cache", &o_rows, &o_x, &cached_n))
+            goto out;
+        if (get_array(o_rows, &b[NBUF], "rows", m * ROW, 1, 0) < 0 || get_array(o_x, &b[NBUF + 1], "rows_x", NP, 0, 0) < 0)
+            goto out;
+        if (cached_n < 0 || cached_n > m) {
+            PyErr_SetString(PyExc_ValueError, "cached_n: outside the window");
+            goto out;
+        }
+        rows_trial = PyMem_Malloc((size_t)(ROW * m + 1) * sizeof(double));
+        if (!rows_trial) {
+            PyErr_NoMemory();
+            goto out;
+        }
+    }
     Problem p = {m, b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, b[5].view.buf, wheel,
                  b[9].view.buf, b[10].view.buf, b[11].view.buf, mu_c, dmu, alpha, sc4, sc5, sc6};
     /* The GIL stays held: tens of microseconds, and a release would let the daemon's other
      * threads (or a test bench's sender) in mid-update, adding their time to the latency. */
     const Outcome o = solve(&p, b[6].view.buf, b[7].view.buf, b[8].view.buf, radius, max_iterations, ftol, xtol,
                             gtol, max_rejections, predicted_ftol, b[12].view.buf, b[13].view.buf, b[14].view.buf,
-                            b[15].view.buf);
+                            b[15].view.buf, rows_trial ? b[NBUF].view.buf : NULL,
+                            rows_trial ? b[NBUF + 1].view.buf : NULL, cached_n, rows_trial);
     result = Py_BuildValue("(ddiOi)", o.cost, o.radius, o.iterations, o.converged ? Py_True : Py_False,
                            o.evaluations);
 out:
-    release_all(b, NBUF);
+    PyMem_Free(rows_trial);
+    release_all(b, NBUF + 2);
     return result;
 }
 
@@ -1058,7 +1104,8 @@ static PyMethodDef methods[] = {
     {"solve", py_solve, METH_VARARGS,
      "solve(pow_lam_v, stiff, lam_v, mu, wheel, sw, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
      "      r_data, r_work, (mu_c, dmu, alpha, sc4, sc5, sc6), radius, max_iterations, ftol, xtol, gtol,\n"
-     "      predicted_ftol, max_rejections) -> (cost, radius, iterations, converged, evaluations)\n\n"
+     "      predicted_ftol, max_rejections[, (rows, rows_x, cached_n)]) -> (cost, radius, iterations, converged,\n"
+     "      evaluations)\n\n"
      "The estimator's fit: x (in/out), gradient, normal and r_data (the weighted data residuals)\n"
      "are written in place at the returned point."},
     {"peaks_near", py_peaks_near, METH_VARARGS,

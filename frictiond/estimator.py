@@ -272,6 +272,10 @@ class _Window:
         self.pow_lam_v = np.empty(capacity)
         self.stiff = np.empty(capacity)
         self.rows = np.empty((N_WHEELS + len(SHARED) + 1, capacity))
+        # The compiled fit's cache of the same: per sample its 5 unweighted row values at the
+        # parameters `LugreTrustRegionEstimator._core_rows_x`, valid before `core_cached_end`.
+        self.core_rows = np.empty((capacity, 5))
+        self.core_cached_end = 0
         self.start = 0
         self.end = 0
         self.cached_end = 0
@@ -281,7 +285,7 @@ class _Window:
         return self.end - self.start
 
     def clear(self) -> None:
-        self.start = self.end = self.cached_end = 0
+        self.start = self.end = self.cached_end = self.core_cached_end = 0
         self.last_time_by_axle = [-math.inf, -math.inf]
 
     def has_recent(self, axle: int, since_s: float) -> bool:
@@ -296,7 +300,9 @@ class _Window:
             for arr in (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v, self.stiff):
                 arr[:n] = arr[s:e]
             self.rows[:, :n] = self.rows[:, s:e]
+            self.core_rows[:n] = self.core_rows[s:e]
             self.cached_end = max(self.cached_end - s, 0)
+            self.core_cached_end = max(self.core_cached_end - s, 0)
             self.start, self.end = 0, n
             if n == self.capacity:  # full: drop the oldest quarter
                 self.drop_before(self.time[self.capacity // 4])
@@ -380,6 +386,7 @@ class LugreTrustRegionEstimator:
         self._radius: float | None = None
         self._window = _Window(alpha=o.alpha, patch_length=o.patch_length)
         self._cache_x: np.ndarray | None = None
+        self._core_rows_x: np.ndarray | None = None
         self._last_valid: FrictionEstimate | None = None
         self._last_excited_s = -math.inf
         self._last_estimate: FrictionEstimate | None = None
@@ -756,11 +763,16 @@ class LugreTrustRegionEstimator:
         n = len(x)
         gradient, normal = np.empty(n), np.empty((n, n))
         r_data, r_work = np.empty(hi - lo), np.empty(hi - lo)
+        # The rows of the samples already in the window were computed at this x by the last
+        # update (its result): only the new samples' rows are computed for the first evaluation.
+        cached = w.core_cached_end - lo if self._core_rows_x is not None and w.core_cached_end > lo else 0
         _, radius, _, _, _ = self.core.solve(
             w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, x, self._lb,
             self._ub, self._prior, self._inv_prior_std, self._tie_rel_d, gradient, normal, r_data, r_work,
             self._core_constants, math.nan if self._radius is None else self._radius, o.max_iterations, o.ftol,
-            o.xtol, 1e-8, o.predicted_ftol, 4)
+            o.xtol, 1e-8, o.predicted_ftol, 4, (w.core_rows[lo:hi], self._core_rows_x if cached else x, cached))
+        w.core_cached_end = hi
+        self._core_rows_x = x
         self._cache_x = None   # (the numpy path's row cache is not kept up here)
         self._x = x
         self._radius = max(radius, 1e-3)

@@ -330,3 +330,35 @@ def test_compiled_grid_peak_search_matches_numpy(monkeypatch):
         np.testing.assert_allclose(c_lam, lam, rtol=1e-12)
     with pytest.raises(ValueError, match="grid"):
         core.peaks_grid(10.0, [1.0], np.array([0.1, 0.2]), tm._FINE, (0.8, 0.75, 0.5, 36.0, 6.0, 0.002))
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_the_row_cache_gives_the_uncached_result_and_is_ignored_at_another_point():
+    est, sw = _window_problem()
+    w = est._window
+    lo, hi = w.start, w.end
+    m = hi - lo
+
+    def solve(x0, cache):
+        x = x0.copy()
+        normal, r_data = np.empty((7, 7)), np.empty(m)
+        out = core.solve(w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, x,
+                         est._lb, est._ub, est._prior, est._inv_prior_std, est._tie_rel_d, np.empty(7), normal,
+                         r_data, np.empty(m), est._core_constants, 0.5, 2, 1e-4, 1e-4, 1e-8, 1e-3, 4, *cache)
+        return x, normal, r_data, out
+
+    x0 = est._x + 0.05
+    plain = solve(x0, ())
+    rows = np.empty((m, 5))
+    first = solve(x0, ((rows, x0, 0),))           # fills the cache at its result
+    np.testing.assert_array_equal(first[0], plain[0])
+    again = solve(first[0], ((rows, first[0], m),))   # every row cached at that point
+    fresh = solve(first[0], ())
+    np.testing.assert_array_equal(again[0], fresh[0])
+    np.testing.assert_array_equal(again[1], fresh[1])
+    np.testing.assert_array_equal(again[2], fresh[2])
+    rows[:] = 1e3                                   # wrong rows, recorded at another point: not used
+    other = solve(first[0], ((rows, first[0] + 1e-3, m),))
+    np.testing.assert_array_equal(other[0], fresh[0])
+    with pytest.raises(ValueError, match="cached_n"):
+        solve(x0, ((rows, x0, m + 1),))

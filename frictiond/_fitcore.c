@@ -954,7 +954,8 @@ static PyObject *py_peak_report(PyObject *self, PyObject *args)
 
 /* ------------------------------------------------- weights, residual bias, covariance */
 
-/* Forgetting weights exp(min(t − now, 0)/τ) and the rows' weights √w/σ, into w_out, sw_out. */
+/* Forgetting weights exp(min(t − now, 0)/τ) and the rows' weights √w/σ, into w_out, sw_out;
+ * returns Σ w. */
 static PyObject *py_weights(PyObject *self, PyObject *args)
 {
     (void)self;
@@ -977,12 +978,13 @@ static PyObject *py_weights(PyObject *self, PyObject *args)
     const double *t = b[0].view.buf;
     double *w = b[1].view.buf, *sw = b[2].view.buf;
     const double inv_sigma = 1.0 / sigma;
+    double total = 0.0;
     for (Py_ssize_t j = 0; j < m; j++) {
         w[j] = exp(fmin(t[j] - now, 0.0) / tau);
         sw[j] = sqrt(w[j]) * inv_sigma;
+        total += w[j];
     }
-    result = Py_None;
-    Py_INCREF(result);
+    result = PyFloat_FromDouble(total);
 out:
     release_all(b, 3);
     return result;
@@ -1125,7 +1127,8 @@ static PyMethodDef methods[] = {
      "            v, (mu_c, dmu, alpha, sigma0, sigma0*L, v_s, sigma2), (sc4, sc5, sc6), cov_unit,\n"
      "            variance_factor, share) -> (wheel_mu, wheel_lam, capped, mu_max, slip_star, mu_std, wheel_std)"},
     {"weights", py_weights, METH_VARARGS,
-     "weights(times, now, tau, sigma, weights_out, sw_out): exp(min(t - now, 0)/tau) and sqrt(w)/sigma"},
+     "weights(times, now, tau, sigma, weights_out, sw_out) -> sum of the weights exp(min(t - now, 0)/tau);\n"
+     "sw_out gets sqrt(w)/sigma"},
     {"residual_bias", py_residual_bias, METH_VARARGS,
      "residual_bias(r_data, weights, first, sigma) -> (mean, rms deviation, |sum of signs| / n) of r*sigma/sqrt(w)"},
     {"inverse_free", py_inverse_free, METH_VARARGS,

@@ -248,6 +248,7 @@ def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: l
 
 
 _WHEEL_COLUMN = np.arange(N_WHEELS)[:, None]
+_WHEEL_STD_KEYS = tuple(f"wheel_std_{i}" for i in range(N_WHEELS))
 
 
 class _Window:
@@ -741,16 +742,17 @@ class LugreTrustRegionEstimator:
         slip, speeds, mu_meas, times, wheel = self._window.view()
         if self.core is not None:
             weights, sw = np.empty(len(times)), np.empty(len(times))
-            self.core.weights(times, now_s, o.forgetting_time_constant, o.measurement_std, weights, sw)
+            w_sum = self.core.weights(times, now_s, o.forgetting_time_constant, o.measurement_std, weights, sw)
             normal, r_data = self._solve_compiled(sw)
         else:
             weights = self._weights(now_s, times)
+            w_sum = float(weights.sum())
             sw = np.sqrt(weights) * (1.0 / o.measurement_std)
             normal, r_data = self._solve_numpy(sw)
         self._fits += 1
         self._last_fit_s = now_s
         self._innovation_score = self._innovation(now_s, times, r_data, weights)
-        estimate = self._report(now_s, speed, r_data, normal, weights, slip, mu_meas, speeds, wheel)
+        estimate = self._report(now_s, speed, r_data, normal, weights, w_sum, slip, wheel)
         self._detect_jump(now_s, self._innovation_score)
         return estimate
 
@@ -799,7 +801,7 @@ class LugreTrustRegionEstimator:
         return result.normal, r_data
 
     def _report(self, now_s: float, speed: float, r_data: np.ndarray, normal: np.ndarray, weights: np.ndarray,
-                slip: np.ndarray, mu_meas: np.ndarray, speeds: np.ndarray, wheel: np.ndarray) -> FrictionEstimate:
+                w_sum: float, slip: np.ndarray, wheel: np.ndarray) -> FrictionEstimate:
         o = self.options
         x = self._x
         p = self._params(x)
@@ -820,7 +822,6 @@ class LugreTrustRegionEstimator:
         if self._due(0) or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(weights)
         # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
-        w_sum = float(weights.sum())
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, float(r_data @ r_data) / dof)
         if self._cov_unit is None or self._due(2):
@@ -859,8 +860,8 @@ class LugreTrustRegionEstimator:
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
                   "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
                   "jumps": float(self._jumps)}
-        for i, s in enumerate(wheel_std):
-            detail[f"wheel_std_{i}"] = float(s)
+        for key, s in zip(_WHEEL_STD_KEYS, wheel_std):
+            detail[key] = float(s)
         if excitation > 0:
             self._balance_axles(now_s, wheel_mu, weights, wheel)
         # Hysteresis: an estimate that was VALID last cycle (and not since invalidated by a jump)
@@ -1026,7 +1027,12 @@ class LugreTrustRegionEstimator:
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""
         lam_hi = np.where(np.isfinite(self._slip_support), self._slip_support, 1e-3)
-        mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
+        p = self._params(self._x)
+        if self.core is not None:
+            mu, _ = self.core.mu_partials_few(lam_hi.tolist(), max(speed, 1.0), self._thetas(self._x).tolist(), (
+                p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.sigma0 * p.patch_length, p.v_s, p.sigma2))
+            return mu
+        mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), p)
         return mu
 
     def _excitation(self, weights: np.ndarray, wheel_mu: np.ndarray, wheel_lam: np.ndarray, speed: float = 10.0) -> float:

@@ -277,6 +277,7 @@ class _Window:
         # parameters `LugreTrustRegionEstimator._core_rows_x`, valid before `core_cached_end`.
         self.core_rows = np.empty((capacity, 5))
         self.core_cached_end = 0
+        self.scratch = np.empty((2, capacity))   # the compiled fit's residual buffers
         self.start = 0
         self.end = 0
         self.cached_end = 0
@@ -374,6 +375,7 @@ class LugreTrustRegionEstimator:
         self._prior_peak: tuple[tuple, tuple] | None = None   # (speed, prior) → peak of the prior
         self._params_cache: tuple[tuple, LugreParams] | None = None
         self._core_constants = (float(o.mu_c), float(o.mu_s - o.mu_c), self._alpha) + self._shared_scale
+        self._gradient_buffer, self._normal_buffer = np.empty(len(self._scale)), np.empty((len(self._scale),) * 2)
         # The compiled fit when installed; `None` runs the numpy path (tests, benchmarks compare).
         self.core = compiled_fit
         self.reset()
@@ -497,12 +499,14 @@ class LugreTrustRegionEstimator:
         v = sample.speed_mps
         loads = sample.normal_force_n
         total_load = sum(loads)
-        if total_load > 0 and all(f >= 0 for f in loads):   # (NaN fails both)
+        if total_load > 0 and min(loads) >= 0:   # (a NaN load makes the sum NaN: fails the first)
             self._load_share = [f / total_load for f in loads]
-        for i in range(N_WHEELS):
-            slip = sample.slip[i]
-            if sample.usable[i] and slip >= o.min_slip and math.isfinite(sample.mu_used[i]):
-                window.append(slip, v, sample.mu_used[i] * self._axle_scale(i), t, i)
+        scales = None
+        for i, (slip, usable, mu_used) in enumerate(zip(sample.slip, sample.usable, sample.mu_used)):
+            if usable and slip >= o.min_slip and math.isfinite(mu_used):
+                if scales is None:
+                    scales = (self._axle_scale(0), self._axle_scale(2))
+                window.append(slip, v, mu_used * scales[i >= 2], t, i)
                 added += 1
         if added and fresh:
             self._new_event()
@@ -762,9 +766,9 @@ class LugreTrustRegionEstimator:
         w = self._window
         lo, hi = w.start, w.end
         x = self._x.copy()
-        n = len(x)
-        gradient, normal = np.empty(n), np.empty((n, n))
-        r_data, r_work = np.empty(hi - lo), np.empty(hi - lo)
+        # Scratch for this update only (r_data and normal are read by the report, not kept).
+        gradient, normal = self._gradient_buffer, self._normal_buffer
+        r_data, r_work = w.scratch[0, :hi - lo], w.scratch[1, :hi - lo]
         # The rows of the samples already in the window were computed at this x by the last
         # update (its result): only the new samples' rows are computed for the first evaluation.
         cached = w.core_cached_end - lo if self._core_rows_x is not None and w.core_cached_end > lo else 0

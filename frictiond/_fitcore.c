@@ -9,6 +9,9 @@
  * microseconds. The Python path stays the reference and the fallback where no compiler was
  * available at install (tests compare the two).
  *
+ * The tyre-model functions take the LuGre parameters as one tuple, `params` =
+ * (mu_c, mu_s - mu_c, alpha, sigma0, sigma0·L, v_s, sigma2): tyre_model.compiled_params.
+ *
  * Arrays arrive through the buffer protocol (C-contiguous float64, the wheel index as intp),
  * so building needs no numpy headers. Pure numerics: nothing of CAN.
  */
@@ -533,10 +536,10 @@ out:
 static PyObject *py_peaks_near(PyObject *self, PyObject *args)
 {
     (void)self;
-    double v, mu_c, dmu, alpha, theta_k, v_s, sigma2, thetas[MAX_POINTS], near[MAX_POINTS];
+    double v, mu_c, dmu, alpha, sigma0, theta_k, v_s, sigma2, thetas[MAX_POINTS], near[MAX_POINTS];
     PyObject *theta_obj, *near_obj;
-    if (!PyArg_ParseTuple(args, "dOO(dddddd):peaks_near", &v, &theta_obj, &near_obj, &mu_c, &dmu, &alpha,
-                          &theta_k, &v_s, &sigma2))
+    if (!PyArg_ParseTuple(args, "dOO(ddddddd):peaks_near", &v, &theta_obj, &near_obj, &mu_c, &dmu, &alpha,
+                          &sigma0, &theta_k, &v_s, &sigma2))
         return NULL;
     const Py_ssize_t n = floats(theta_obj, thetas, "thetas");
     if (n < 0)
@@ -599,10 +602,10 @@ static double mu_grid_one(double lam, double v, double theta, double mu_c, doubl
 static PyObject *py_peaks_grid(PyObject *self, PyObject *args)
 {
     (void)self;
-    double v, mu_c, dmu, alpha, theta_k, v_s, sigma2, thetas[MAX_POINTS];
+    double v, mu_c, dmu, alpha, sigma0, theta_k, v_s, sigma2, thetas[MAX_POINTS];
     PyObject *theta_obj, *o_grid, *o_fine;
-    if (!PyArg_ParseTuple(args, "dOOO(dddddd):peaks_grid", &v, &theta_obj, &o_grid, &o_fine, &mu_c, &dmu, &alpha,
-                          &theta_k, &v_s, &sigma2))
+    if (!PyArg_ParseTuple(args, "dOOO(ddddddd):peaks_grid", &v, &theta_obj, &o_grid, &o_fine, &mu_c, &dmu, &alpha,
+                          &sigma0, &theta_k, &v_s, &sigma2))
         return NULL;
     const Py_ssize_t n = floats(theta_obj, thetas, "thetas");
     if (n < 0)
@@ -1111,20 +1114,20 @@ static PyMethodDef methods[] = {
      "The estimator's fit: x (in/out), gradient, normal and r_data (the weighted data residuals)\n"
      "are written in place at the returned point."},
     {"peaks_near", py_peaks_near, METH_VARARGS,
-     "peaks_near(v, thetas, near, (mu_c, dmu, alpha, sigma0*L, v_s, sigma2)) -> (mus, lams) | None\n\n"
+     "peaks_near(v, thetas, near, params) -> (mus, lams) | None\n\n"
      "tyre_model._peaks_near for up to 16 wheels."},
     {"peaks_grid", py_peaks_grid, METH_VARARGS,
-     "peaks_grid(v, thetas, grid, fine, (mu_c, dmu, alpha, sigma0*L, v_s, sigma2)) -> (mus, lams)\n\n"
+     "peaks_grid(v, thetas, grid, fine, params) -> (mus, lams)\n\n"
      "tyre_model.peaks without `near` (the grid search) for up to 16 values of theta."},
     {"mu_partials_few", py_mu_partials_few, METH_VARARGS,
-     "mu_partials_few(lams, v, thetas, (mu_c, dmu, alpha, sigma0, sigma0*L, v_s, sigma2)) -> (mus, rows)\n\n"
+     "mu_partials_few(lams, v, thetas, params) -> (mus, rows)\n\n"
      "tyre_model.braking_mu_and_partials_few; rows flat, 4 per point."},
     {"wheel_stats", py_wheel_stats, METH_VARARGS,
      "wheel_stats(slip, mu, wheel, times, lag, elasticity) -> 4 tuples of 12 floats\n\n"
      "estimator._wheel_stats_numpy: n, q10, q90, lam_lo, lam_hi, mu_hi, run-away rate, s2, s3, s4, y1, y2."},
     {"peak_report", py_peak_report, METH_VARARGS,
      "peak_report(wheel_mu, wheel_lam, support, slip_floor, peak_extrapolation, extrapolation_max_slip, thetas,\n"
-     "            v, (mu_c, dmu, alpha, sigma0, sigma0*L, v_s, sigma2), (sc4, sc5, sc6), cov_unit,\n"
+     "            v, params, (sc4, sc5, sc6), cov_unit,\n"
      "            variance_factor, share) -> (wheel_mu, wheel_lam, capped, mu_max, slip_star, mu_std, wheel_std)"},
     {"weights", py_weights, METH_VARARGS,
      "weights(times, now, tau, sigma, weights_out, sw_out) -> sum of the weights exp(min(t - now, 0)/tau);\n"

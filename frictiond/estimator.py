@@ -47,7 +47,7 @@ except ImportError:  # pragma: no cover - depends on the install
     compiled_fit = None
 from .samples import FrictionEstimate, PhysicalSample, Status
 from .tyre_model import (_SMALL_Z, MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials,
-                         braking_mu_and_partials_few, mu_and_jacobian_theta, peaks)
+                         braking_mu_and_partials_few, compiled_params, mu_and_jacobian_theta, peaks)
 from .vehicle import VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
@@ -815,8 +815,7 @@ class LugreTrustRegionEstimator:
         theta_list = thetas.tolist()
         found = None
         if self.core is not None and near is not None:
-            found = self.core.peaks_near(v_eval, theta_list, near, (p.mu_c, p.mu_s - p.mu_c, p.alpha,
-                                                                    p.sigma0 * p.patch_length, p.v_s, p.sigma2))
+            found = self.core.peaks_near(v_eval, theta_list, near, compiled_params(p))
             near = None   # (tried: what is left is the grid search)
         if found is None:
             grid_mu, grid_lam = peaks(v_eval, p, thetas, near=near)
@@ -849,8 +848,7 @@ class LugreTrustRegionEstimator:
                 o.peak_extrapolation, o.extrapolation_max_slip, theta_list, v_eval)
         tail = (self._shared_scale, self._cov_unit, variance_factor, self._load_share)
         if self.core is not None:
-            numbers = self.core.peak_report(*args, (p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0,
-                                                    p.sigma0 * p.patch_length, p.v_s, p.sigma2), *tail)
+            numbers = self.core.peak_report(*args, compiled_params(p), *tail)
         else:
             numbers = _peak_report_numpy(*args, p, *tail)
         wheel_mu, wheel_lam, self._capped, mu_max, slip_star, mu_std, wheel_std = numbers
@@ -1031,12 +1029,7 @@ class LugreTrustRegionEstimator:
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""
         lam_hi = np.where(np.isfinite(self._slip_support), self._slip_support, 1e-3)
-        p = self._params(self._x)
-        if self.core is not None:
-            mu, _ = self.core.mu_partials_few(lam_hi.tolist(), max(speed, 1.0), self._thetas(self._x).tolist(), (
-                p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.sigma0 * p.patch_length, p.v_s, p.sigma2))
-            return mu
-        mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), p)
+        mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
         return mu
 
     def _excitation(self, weights: np.ndarray, wheel_mu: np.ndarray, wheel_lam: np.ndarray, speed: float = 10.0) -> float:

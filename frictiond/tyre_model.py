@@ -194,6 +194,11 @@ def braking_mu_and_partials(lam: np.ndarray, v: np.ndarray, theta: np.ndarray, p
     return g_over_theta * F + p.sigma2 * lam_v
 
 
+def compiled_params(p: LugreParams) -> tuple[float, ...]:
+    """The parameters as the compiled tyre-model functions take them (`_fitcore.c`)."""
+    return (p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.sigma0 * p.patch_length, p.v_s, p.sigma2)
+
+
 def braking_mu_and_partials_few(lam, v: float, theta, p: LugreParams) -> tuple[np.ndarray, np.ndarray]:
     """`braking_mu_and_partials` at one speed for a handful of (λ, θ) pairs, in floats.
 
@@ -203,8 +208,7 @@ def braking_mu_and_partials_few(lam, v: float, theta, p: LugreParams) -> tuple[n
     lams = np.asarray(lam, dtype=float).ravel().tolist()
     thetas = np.asarray(theta, dtype=float).ravel().tolist()
     if _compiled is not None and len(lams) == len(thetas) <= 16:
-        mus, flat = _compiled.mu_partials_few(lams, float(v), thetas, (
-            p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.sigma0 * p.patch_length, p.v_s, p.sigma2))
+        mus, flat = _compiled.mu_partials_few(lams, float(v), thetas, compiled_params(p))
         return np.array(mus), np.array(flat).reshape(-1, 4)
     exp, expm1 = math.exp, math.expm1
     mu_c, dmu, alpha, sigma0, v_s, sigma2 = p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.v_s, p.sigma2
@@ -254,8 +258,7 @@ def peaks(speed_mps: float, p: LugreParams, thetas, near=None) -> tuple[np.ndarr
             return found
     thetas = np.atleast_1d(np.asarray(thetas, dtype=float))
     if _compiled is not None and thetas.ndim == 1 and len(thetas) <= 16:
-        mus, lams = _compiled.peaks_grid(v, thetas.tolist(), _PEAK_GRID, _FINE, (
-            p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0 * p.patch_length, p.v_s, p.sigma2))
+        mus, lams = _compiled.peaks_grid(v, thetas.tolist(), _PEAK_GRID, _FINE, compiled_params(p))
         return np.array(mus), np.array(lams)
     thetas = thetas[:, None]
     grid = _PEAK_GRID[None, :]
@@ -296,7 +299,7 @@ def _peaks_near(v: float, p: LugreParams, thetas, near) -> tuple[np.ndarray, np.
     if len(theta_list) != len(near_list):
         return None
     if _compiled is not None and len(theta_list) <= 16:
-        found = _compiled.peaks_near(v, theta_list, near_list, (mu_c, dmu, alpha, theta_k, p.v_s, p.sigma2))
+        found = _compiled.peaks_near(v, theta_list, near_list, compiled_params(p))
         return None if found is None else (np.array(found[0]), np.array(found[1]))
     pairs = list(zip(theta_list, near_list))
     for theta, lam in pairs:

@@ -217,13 +217,13 @@ def test_compiled_peaks_and_partials_match_the_float_code(monkeypatch):
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
 def test_compiled_peaks_refuse_bad_arguments():
     with pytest.raises(ValueError, match="at most"):
-        core.peaks_near(10.0, [1.0] * 17, [0.1] * 17, (0.8, 0.75, 0.5, 36.0, 6.0, 0.002))
+        core.peaks_near(10.0, [1.0] * 17, [0.1] * 17, (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002))
     with pytest.raises(TypeError):
         core.mu_partials_few([0.1, "x"], 10.0, [1.0, 1.0], (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002))
     with pytest.raises(ValueError, match="length"):
         core.mu_partials_few([0.1, 0.2], 10.0, [1.0], (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002))
-    assert core.peaks_near(10.0, [1.0], [0.1, 0.2], (0.8, 0.75, 0.5, 36.0, 6.0, 0.002)) is None
-    assert core.peaks_near(0.0, [1.0], [0.1], (0.8, 0.75, 0.5, 36.0, 6.0, 0.002)) is None
+    assert core.peaks_near(10.0, [1.0], [0.1, 0.2], (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002)) is None
+    assert core.peaks_near(0.0, [1.0], [0.1], (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002)) is None
 
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
@@ -270,8 +270,7 @@ def test_compiled_peak_report_matches_numpy():
         share = list(rng.dirichlet(np.ones(4)))
         args = (wheel_mu.tolist(), wheel_lam.tolist(), support.tolist(), floor.tolist(), 2.0, 0.15, thetas.tolist(), v)
         tail = ((1.0, 0.5, 3e-3), cov_unit, float(rng.uniform(1, 3)), share)
-        c = core.peak_report(*args, (p.mu_c, p.mu_s - p.mu_c, p.alpha, p.sigma0, p.sigma0 * p.patch_length, p.v_s,
-                                     p.sigma2), *tail)
+        c = core.peak_report(*args, tm.compiled_params(p), *tail)
         r = _peak_report_numpy(*args, p, *tail)
         np.testing.assert_allclose(c[0], r[0], rtol=1e-13)
         np.testing.assert_allclose(c[1], r[1], rtol=1e-13)
@@ -330,7 +329,7 @@ def test_compiled_grid_peak_search_matches_numpy(monkeypatch):
         np.testing.assert_allclose(c_mu, mu, rtol=1e-12)
         np.testing.assert_allclose(c_lam, lam, rtol=1e-12)
     with pytest.raises(ValueError, match="grid"):
-        core.peaks_grid(10.0, [1.0], np.array([0.1, 0.2]), tm._FINE, (0.8, 0.75, 0.5, 36.0, 6.0, 0.002))
+        core.peaks_grid(10.0, [1.0], np.array([0.1, 0.2]), tm._FINE, (0.8, 0.75, 0.5, 180.0, 36.0, 6.0, 0.002))
 
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")

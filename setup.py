@@ -1,7 +1,8 @@
 """Build of the compiled modules; everything else is in pyproject.toml.
 
 `frictiond._fitcore` (the estimator's per-update numerics) and `frictiond._frontcore` (the front
-end's derivative filter) are optional: without a C compiler the install still succeeds and the
+end's derivative filter) and `frictiond._codeccore` (the output frames' packing and E2E
+protection) are optional: without a C compiler the install still succeeds and the
 same computations run in numpy and plain Python, several times slower.
 """
 from setuptools import Extension, setup
@@ -9,4 +10,5 @@ from setuptools import Extension, setup
 setup(ext_modules=[
     Extension("frictiond._fitcore", ["frictiond/_fitcore.c"], depends=["frictiond/_ccommon.h"], optional=True),
     Extension("frictiond._frontcore", ["frictiond/_frontcore.c"], depends=["frictiond/_ccommon.h"], optional=True),
+    Extension("frictiond._codeccore", ["frictiond/_codeccore.c"], optional=True),
 ])

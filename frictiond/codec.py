@@ -6,6 +6,7 @@ docs/architecture.md (rad/s, m/s², rad/s, bar, m/s, N·m), whatever the vehicle
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, NamedTuple, Sequence
@@ -18,6 +19,13 @@ from .e2e import E2EChecker, protect
 from .frames import Frame
 from .frontend import OPTIONAL_INPUTS, REQUIRED_INPUTS
 from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
+
+try:
+    # Output packing and E2E protection compiled (setup.py builds it when a C compiler is there);
+    # `_Packer.encode`'s Python path and `e2e.protect` are the fallback and the reference.
+    from . import _codeccore as compiled_codec
+except ImportError:  # pragma: no cover - depends on the install
+    compiled_codec = None
 
 ESTIMATE_MESSAGE = "FRICTION_ESTIMATE"
 WHEEL_MESSAGE = "FRICTION_WHEEL"
@@ -485,6 +493,37 @@ class _Packer:
         self._flat: dict[tuple, tuple] | None = None
         if self.root is not None and not any(sub[1] for _, _, _, pages in self.root[1] for sub in pages.values()):
             self._flat = {}
+        # `_codeccore.pack`'s field tables, by id() of the field tuples they were built from (only
+        # tuples this packer keeps for its lifetime: the root's, and the flattened pages').
+        self.core = compiled_codec
+        self._specs: dict[int, tuple[bytes, tuple[str, ...]]] = {}
+        if self.root is not None and not self.root[1]:
+            self._register(self.root[0])
+
+    def _register(self, fields: tuple) -> None:
+        """Build `_codeccore.pack`'s field table for a page: a classical payload whose fields all
+        use linear or identity integer conversions of ≤ 52 bits (raw values a double holds
+        exactly); other pages keep to the Python path."""
+        if self.length > 8:
+            return
+        specs, names = [], []
+        for name, lo, hi, scale, offset, to_raw, little, shift, mask, low, high in fields:
+            # The conversion behind a `numeric_scaled_to_raw` (a signal with value names
+            # delegates to its numeric conversion).
+            conversion = getattr(to_raw, "__self__", None)
+            kind = type(conversion).__name__
+            if kind == "LinearIntegerConversion":
+                # Its exact-quotient branch gives what round((value - offset) / scale) gives
+                # while raw values stay below 2**53, which the width check below ensures.
+                scale, offset, to_raw = conversion.scale, conversion.offset, None
+            elif kind == "IdentityConversion" and not conversion.is_float:
+                scale, offset, to_raw = None, 0, None
+            if to_raw is not None or mask.bit_length() > 52:
+                return
+            specs.append(struct.pack("<4d3qQ2q", lo, hi, 1.0 if scale is None else scale, offset,
+                                     scale is None, little, shift, mask, low, high))
+            names.append(name)
+        self._specs[id(fields)] = (b"".join(specs), tuple(names))
 
     def _compile(self, node: dict) -> tuple:
         fields = []
@@ -508,6 +547,12 @@ class _Packer:
         if self.root is not None:
             fields = self._fields(values)
         if fields is not None:
+            if self.core is not None and type(values) is dict:
+                spec = self._specs.get(id(fields))
+                if spec is not None:
+                    payload = self.core.pack(spec[0], spec[1], values, self.length)
+                    if payload is not None:
+                        return payload
             big = little_word = 0  # the payload read as a big-endian and as a little-endian integer
             for name, lo, hi, scale, offset, to_raw, little, shift, mask, low, high in fields:
                 value = values[name]
@@ -556,6 +601,7 @@ class _Packer:
             fields = self._walk(self.root, values)  # type: ignore[arg-type]
             if fields is not None:
                 self._flat[key] = fields
+                self._register(fields)
         return fields
 
     def _walk(self, node: tuple, values: Mapping[str, Any]) -> tuple | None:
@@ -620,9 +666,24 @@ class OutputCodec:
             missing = [n for n in names if n not in present]
             if missing:
                 raise ConfigError(f"can.output_dbc: {message.name} lacks signal(s) {', '.join(missing)}")
+            crc, counter = message.get_signal_by_name("Crc"), message.get_signal_by_name("Counter")
+            if not (crc.start == 0 and crc.length == 8 and crc.byte_order == "little_endian"
+                    and counter.length == 4 and counter.byte_order == "little_endian"
+                    and counter.start % 8 <= 4 and counter.start < 8 * message.length):
+                # e2e.protect writes the CRC into byte 0 and the counter as a nibble of one byte.
+                raise ConfigError(f"can.output_dbc: {message.name} needs Crc as 0|8@1+ and Counter as a "
+                                  f"4-bit little-endian field within one byte (can-contract.md)")
         self.estimate_id: int = self.estimate_message.frame_id
         self.wheel_id: int = self.wheel_message.frame_id
         self._signals = {m.frame_id: {s.name: s for s in m.signals} for m in (self.estimate_message, self.wheel_message)}
+        # Signals a vehicle's output DBC adds beyond the contract's (spare bits, another ECU's
+        # fields) are sent at their idle value rather than refused or left to fail at send time.
+        contract = {"Crc", "Counter", "EstimatorStatus", "MuMax", "SlipAtMuMax", "Theta", "Confidence",
+                    "WheelIndex", "Slip", "MuUsed", "MuMaxWheel", "NormalForce"}
+        self._extra_values = {
+            fid: {name: _idle_value(sig) for name, sig in sigs.items() if name not in contract}
+            for fid, sigs in self._signals.items()
+        }
         self._counters = {self.estimate_id: 0, self.wheel_id: 0}
         self._counter_bit = {
             fid: sigs["Counter"].start for fid, sigs in self._signals.items()
@@ -632,12 +693,18 @@ class OutputCodec:
             for fid, m in ((self.estimate_id, self.estimate_message), (self.wheel_id, self.wheel_message))
         }
         self.e2e = E2EChecker()
+        self.core = compiled_codec
 
     def _encode(self, frame_id: int, message: Any, values: dict[str, float]) -> bytes:
-        payload = bytearray(self._packers[frame_id].encode(values))
+        extra = self._extra_values[frame_id]
+        if extra:
+            values.update(extra)
+        payload = self._packers[frame_id].encode(values)
         counter = self._counters[frame_id]
         self._counters[frame_id] = (counter + 1) & 0x0F
-        return bytes(protect(frame_id, payload, counter, self._counter_bit[frame_id]))
+        if self.core is not None and len(payload) > self._counter_bit[frame_id] // 8:
+            return self.core.protect(frame_id, payload, counter, self._counter_bit[frame_id])
+        return bytes(protect(frame_id, bytearray(payload), counter, self._counter_bit[frame_id]))
 
     def encode_estimate(self, estimate: FrictionEstimate) -> bytes:
         status = int(estimate.status)

@@ -7,7 +7,7 @@ import cantools
 import pytest
 
 from frictiond.codec import DecodeFailure, InputCodec, OutputCodec, load_databases
-from frictiond.config import load_config
+from frictiond.config import ConfigError, load_config
 from frictiond.e2e import E2EChecker, crc8_sae_j1850, e2e_crc
 from frictiond.frames import Frame
 from frictiond.samples import FrictionEstimate, PhysicalSample, Status
@@ -148,3 +148,34 @@ def test_e2e_checker_sees_corruption_and_loss(default_config):
     corrupt[3] ^= 0x10
     assert checker.check(0x3E0, bytes(corrupt)) == "crc"
     assert checker.crc_failures == 1
+
+
+def test_output_dbc_with_spare_signals_sends_them_idle(tmp_path):
+    # A vehicle's own copy of the output messages may carry signals the contract does not name.
+    text = DBC.read_text().replace(
+        ' SG_ Confidence : 54|8@1+ (0.005,0) [0|1] "" VEHICLE\n',
+        ' SG_ Confidence : 54|8@1+ (0.005,0) [0|1] "" VEHICLE\n SG_ Spare : 62|2@1+ (1,1) [1|3] "" VEHICLE\n')
+    assert "Spare" in text
+    path = tmp_path / "out.dbc"
+    path.write_text(text)
+    out = OutputCodec(load_databases([path]))
+    data = out.encode_estimate(FrictionEstimate(0.0, Status.VALID, 0.8, 0.1, 1.0, 0.9))
+    decoded = out.decode_output(Frame(0.0, out.estimate_id, data))
+    assert decoded["e2e"] == "ok" and decoded["MuMax"] == pytest.approx(0.8) and decoded["Spare"] == 1
+
+
+@pytest.mark.parametrize("edits", [
+    [("Counter : 8|4@1+ (1,0) [0|15]", "Counter : 8|2@1+ (1,0) [0|3]")],                  # not a nibble
+    [("Counter : 8|4@1+", "Counter : 13|4@1+"), ("EstimatorStatus : 12|4@1+", "EstimatorStatus : 8|4@1+"),
+     ("MuMax : 16|16@1+", "MuMax : 17|15@1+")],                                               # across bytes
+    [("Crc : 0|8@1+", "Crc : 7|8@0+")],                                                       # big-endian CRC
+])
+def test_output_dbc_whose_e2e_fields_cannot_be_written_is_refused(tmp_path, edits):
+    text = DBC.read_text()
+    for old, new in edits:
+        assert old in text
+        text = text.replace(old, new, 1)   # (the first: FRICTION_ESTIMATE's)
+    path = tmp_path / "out.dbc"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match="FRICTION_ESTIMATE needs Crc as 0"):
+        OutputCodec(load_databases([path]))

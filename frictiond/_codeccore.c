@@ -1,0 +1,164 @@
+/*
+ * The output codec's per-frame work, compiled: packing signal values into a classical (≤ 8 byte)
+ * payload with shifts and masks, and the E2E counter + CRC. Knows CAN payloads, nothing of tyres.
+ *
+ * Each function reproduces its Python twin in frictiond/codec.py (`_Packer.encode`'s shift-and-mask
+ * path) and frictiond/e2e.py (`protect`) bit for bit; tests/test_codeccore.py holds them to it.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+
+/* One signal of a message, as codec._Packer.field_spec packs it ("<4d3qQ2q", 80 bytes). */
+typedef struct {
+    double lo, hi;        /* the physical range a value is clipped to (NaN → lo) */
+    double scale, offset; /* raw = round((value - offset) / scale); identity: round(value) */
+    int64_t identity;
+    int64_t little;       /* 1: bits of the payload read little-endian, 0: big-endian */
+    int64_t shift;
+    uint64_t mask;
+    int64_t low, high;    /* the raw values the field holds */
+} Field;
+
+/* A value as a double when it is a Python float or an int a double holds exactly; else -1. */
+static int as_double(PyObject *v, double *out)
+{
+    if (PyFloat_Check(v)) {
+        *out = PyFloat_AS_DOUBLE(v);
+        return 0;
+    }
+    if (PyLong_Check(v)) {
+        int overflow = 0;
+        const long long i = PyLong_AsLongLongAndOverflow(v, &overflow);
+        if (overflow || (i == -1 && PyErr_Occurred())) {
+            PyErr_Clear();
+            return -1;
+        }
+        if (i > (1LL << 53) || i < -(1LL << 53))
+            return -1;
+        *out = (double)i;
+        return 0;
+    }
+    return -1;
+}
+
+static PyObject *py_pack(PyObject *self, PyObject *args)
+{
+    Py_buffer spec;
+    PyObject *names, *values;
+    Py_ssize_t length;
+    if (!PyArg_ParseTuple(args, "y*O!O!n", &spec, &PyTuple_Type, &names, &PyDict_Type, &values, &length))
+        return NULL;
+    const Py_ssize_t count = spec.len / (Py_ssize_t)sizeof(Field);
+    if (spec.len % (Py_ssize_t)sizeof(Field) || count != PyTuple_GET_SIZE(names) || length < 0 || length > 8) {
+        PyBuffer_Release(&spec);
+        PyErr_SetString(PyExc_ValueError, "pack: spec, names and length (≤ 8) do not agree");
+        return NULL;
+    }
+    Field field;
+    uint64_t big = 0, little = 0;
+    for (Py_ssize_t k = 0; k < count; k++) {
+        memcpy(&field, (const char *)spec.buf + k * (Py_ssize_t)sizeof(Field), sizeof(Field));
+        PyObject *name = PyTuple_GET_ITEM(names, k);
+        PyObject *item = PyDict_GetItemWithError(values, name);
+        if (!item) {
+            PyBuffer_Release(&spec);
+            if (!PyErr_Occurred())
+                PyErr_SetObject(PyExc_KeyError, name);
+            return NULL;
+        }
+        double value;
+        if (as_double(item, &value) < 0) {
+            PyBuffer_Release(&spec);
+            Py_RETURN_NONE;   /* not a plain number: the Python path decides */
+        }
+        if (value != value)
+            value = field.lo;
+        else {
+            if (field.lo > value)
+                value = field.lo;
+            if (field.hi < value)
+                value = field.hi;
+        }
+        /* nearbyint rounds half to even in the default mode, as Python's round() */
+        const double raw = field.identity ? nearbyint(value) : nearbyint((value - field.offset) / field.scale);
+        if (!(raw >= (double)field.low && raw <= (double)field.high)) {
+            PyBuffer_Release(&spec);
+            Py_RETURN_NONE;   /* outside the field: cantools' own path reports it */
+        }
+        const uint64_t bits = ((uint64_t)(int64_t)raw & field.mask) << field.shift;
+        if (field.little)
+            little |= bits;
+        else
+            big |= bits;
+    }
+    PyBuffer_Release(&spec);
+    unsigned char out[8];
+    for (Py_ssize_t i = 0; i < length; i++)
+        out[i] = (unsigned char)(((little >> (8 * i)) | (big >> (8 * (length - 1 - i)))) & 0xFF);
+    return PyBytes_FromStringAndSize((const char *)out, length);
+}
+
+static unsigned char crc_table[256];
+
+static void make_crc_table(void)
+{
+    for (int byte = 0; byte < 256; byte++) {
+        unsigned crc = (unsigned)byte;
+        for (int bit = 0; bit < 8; bit++)
+            crc = crc & 0x80 ? ((crc << 1) ^ 0x1D) & 0xFF : (crc << 1) & 0xFF;
+        crc_table[byte] = (unsigned char)crc;
+    }
+}
+
+static PyObject *py_protect(PyObject *self, PyObject *args)
+{
+    Py_buffer payload;
+    long long data_id, counter, counter_bit;
+    if (!PyArg_ParseTuple(args, "Ly*LL", &data_id, &payload, &counter, &counter_bit))
+        return NULL;
+    const Py_ssize_t n = payload.len;
+    const long long byte = counter_bit >= 0 ? counter_bit / 8 : -1;
+    if (n < 1 || byte < 0 || byte >= n || n > 64) {
+        PyBuffer_Release(&payload);
+        PyErr_SetString(PyExc_IndexError, "protect: counter or CRC byte outside the payload");
+        return NULL;
+    }
+    if (counter_bit % 8 > 4) {
+        PyBuffer_Release(&payload);
+        PyErr_SetString(PyExc_ValueError, "protect: the 4-bit counter would cross a byte boundary");
+        return NULL;
+    }
+    unsigned char out[64];
+    memcpy(out, payload.buf, (size_t)n);
+    PyBuffer_Release(&payload);
+    const int shift = (int)(counter_bit % 8);
+    out[byte] = (unsigned char)((out[byte] & ~(0x0F << shift) & 0xFF) | ((counter & 0x0F) << shift));
+    unsigned crc = crc_table[0xFF ^ (data_id & 0xFF)];
+    crc = crc_table[crc ^ ((data_id >> 8) & 0xFF)];
+    for (Py_ssize_t i = 1; i < n && i < 8; i++)
+        crc = crc_table[crc ^ out[i]];
+    out[0] = (unsigned char)(crc ^ 0xFF);
+    return PyBytes_FromStringAndSize((const char *)out, n);
+}
+
+static PyMethodDef methods[] = {
+    {"pack", py_pack, METH_VARARGS,
+     "pack(spec, names, values, length) -> bytes | None\n\n"
+     "codec._Packer.encode's shift-and-mask path for a message of ≤ 8 bytes; None when a value is\n"
+     "not a plain number or its raw value does not fit its field (the Python path handles those)."},
+    {"protect", py_protect, METH_VARARGS,
+     "protect(data_id, payload, counter, counter_bit) -> bytes: e2e.protect on a copy."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_codeccore",
+                                    "The output codec's per-frame packing and E2E protection, compiled.",
+                                    -1, methods, NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__codeccore(void)
+{
+    make_crc_table();
+    return PyModule_Create(&module);
+}

@@ -208,6 +208,87 @@ out:
     return result;
 }
 
+/* _MessageHistory.value_at for one signal: its (times, values) deques at time t; a new reference. */
+static PyObject *value_at(PyObject *pair, double t)
+{
+    if (!PyTuple_Check(pair) || PyTuple_GET_SIZE(pair) != 2) {
+        PyErr_SetString(PyExc_TypeError, "values_at: a series is a (times, values) pair");
+        return NULL;
+    }
+    PyObject *times = PyTuple_GET_ITEM(pair, 0), *values = PyTuple_GET_ITEM(pair, 1);
+    const Py_ssize_t n = PySequence_Size(times);
+    if (n < 1 || PySequence_Size(values) != n) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "values_at: an empty or ragged series");
+        return NULL;
+    }
+    double t1 = 0.0, t0;
+    for (Py_ssize_t k = n - 1; k >= 0; k--) {
+        PyObject *item = PySequence_GetItem(times, k);
+        if (!item)
+            return NULL;
+        t0 = PyFloat_AsDouble(item);
+        Py_DECREF(item);
+        if (t0 == -1.0 && PyErr_Occurred())
+            return NULL;
+        if (k == n - 1) {
+            if (t >= t0)
+                return PySequence_GetItem(values, k);   /* the newest value, as it came */
+        } else if (t0 <= t) {
+            PyObject *a = PySequence_GetItem(values, k), *b = a ? PySequence_GetItem(values, k + 1) : NULL;
+            if (!b) {
+                Py_XDECREF(a);
+                return NULL;
+            }
+            const double v0 = PyFloat_AsDouble(a), v1 = PyFloat_AsDouble(b);
+            Py_DECREF(a);
+            Py_DECREF(b);
+            if (PyErr_Occurred())
+                return NULL;
+            const double w = t1 > t0 ? (t - t0) / (t1 - t0) : 1.0;
+            return PyFloat_FromDouble(v0 + w * (v1 - v0));
+        }
+        t1 = t0;
+    }
+    return PySequence_GetItem(values, 0);   /* older than the whole series: its oldest value */
+}
+
+static PyObject *py_values_at(PyObject *self, PyObject *args)
+{
+    PyObject *lookups;
+    double t;
+    if (!PyArg_ParseTuple(args, "O!d", &PyTuple_Type, &lookups, &t))
+        return NULL;
+    const Py_ssize_t count = PyTuple_GET_SIZE(lookups);
+    PyObject *out = PyTuple_New(count);
+    if (!out)
+        return NULL;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *value;
+        if (lookup == Py_None) {
+            value = Py_NewRef(Py_None);
+        } else {
+            PyObject *series, *name;
+            if (!PyArg_ParseTuple(lookup, "O!O:values_at", &PyDict_Type, &series, &name)) {
+                Py_DECREF(out);
+                return NULL;
+            }
+            PyObject *pair = PyDict_GetItemWithError(series, name);
+            if (!pair && PyErr_Occurred()) {
+                Py_DECREF(out);
+                return NULL;
+            }
+            value = pair ? value_at(pair, t) : Py_NewRef(Py_None);
+            if (!value) {
+                Py_DECREF(out);
+                return NULL;
+            }
+        }
+        PyTuple_SET_ITEM(out, i, value);
+    }
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"fit_wheels", py_fit_wheels, METH_VARARGS,
      "fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights) | None\n\n"
@@ -215,6 +296,9 @@ static PyMethodDef methods[] = {
     {"matched", py_matched, METH_VARARGS,
      "matched(ts, vs, times, weights, floor) -> float: FrontEnd._matched's weighted sum of a series\n"
      "interpolated at the window's times (floor: None, or subtracted and clipped at 0 per value)."},
+    {"values_at", py_values_at, METH_VARARGS,
+     "values_at(lookups, t) -> tuple: for each (series dict, name) of lookups (or None), what\n"
+     "_MessageHistory.value_at(t, name) gives: None when the signal has no series yet."},
     {NULL, NULL, 0, NULL},
 };
 

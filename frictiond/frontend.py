@@ -215,6 +215,13 @@ class FrontEnd:
         self._has_ref_speed = "vehicle_speed_ref" in self._signal_message
         self._has_drive_torque = all(n in self._signal_message for n in DRIVE_TORQUE_NAMES)
         self._has_yaw_rate = "yaw_rate" in self._signal_message
+        # The signals each sample reads at the window's centre, fetched in one call
+        # (`_values_at`): accelerations, pressures, then the optional drive torques and yaw rate.
+        self._sample_inputs = (("accel_long", "accel_lat") + PRESSURE_NAMES
+                               + (DRIVE_TORQUE_NAMES if self._has_drive_torque else ())
+                               + (("yaw_rate",) if self._has_yaw_rate else ()))
+        self._sample_lookups = tuple((self._source[n].series, n) if n in self._source else None
+                                     for n in self._sample_inputs)
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -459,14 +466,20 @@ class FrontEnd:
             return None
         return history.value_at(time_s, name)
 
+    def _values_at(self, time_s: float) -> tuple[float | None, ...]:
+        """`_value` of each of `_sample_inputs` at one time."""
+        if self.core is not None:
+            return self.core.values_at(self._sample_lookups, time_s)
+        return tuple([self._value(name, time_s) for name in self._sample_inputs])
+
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         opts = self.options
         veh = self.vehicle
         t_c, omega, omega_dot, glitch = self._fit_wheels()
 
-        accel_long_raw = self._value("accel_long", t_c)
-        accel_lat = self._value("accel_lat", t_c)
-        pressures = [self._value(n, t_c) for n in PRESSURE_NAMES]
+        inputs = self._values_at(t_c)
+        accel_long_raw, accel_lat = inputs[0], inputs[1]
+        pressures = list(inputs[2:6])
         if accel_long_raw is None or accel_lat is None or None in pressures:
             return FrontEndResult(None, stale, None)
         if abs(accel_long_raw) > MAX_ABS_ACCEL_MPS2 or abs(accel_lat) > MAX_ABS_ACCEL_MPS2:
@@ -475,8 +488,8 @@ class FrontEnd:
             return FrontEndResult(None, stale, "brake pressure out of range")
         drive = [0.0, 0.0, 0.0, 0.0]
         if self._has_drive_torque:
-            for i, n in enumerate(DRIVE_TORQUE_NAMES):
-                v = self._value(n, t_c)
+            for i in range(4):
+                v = inputs[6 + i]
                 drive[i] = v if v is not None and math.isfinite(v) else 0.0
 
         radius = veh.wheel_radius
@@ -517,7 +530,7 @@ class FrontEnd:
         if free_rolling:
             self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
 
-        yaw_rate = self._value("yaw_rate", t_c) if self._has_yaw_rate else None
+        yaw_rate = inputs[-1] if self._has_yaw_rate else None
         if yaw_rate is None or not math.isfinite(yaw_rate):
             yaw_rate = accel_lat / speed if speed > opts.min_speed else 0.0
 

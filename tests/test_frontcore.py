@@ -98,3 +98,24 @@ def test_matched_sum_is_the_interpolation_plan(floor):
         assert core.matched(ts, vs, times, weights, floor) == pytest.approx(expected, rel=1e-12, abs=1e-12)
     with pytest.raises(ValueError, match="matched"):
         core.matched([], [], [0.0], [1.0], None)
+
+
+@needs_core
+def test_values_at_is_value_at_for_every_signal():
+    rng = np.random.default_rng(21)
+    history = frontend_module._MessageHistory(0.01)
+    for step in range(60):
+        t = 0.01 * step + float(rng.uniform(-0.004, 0.004))
+        if step % 7 == 3:
+            t = 0.01 * (step - 1)   # a repeated time stamp (t1 == t0 in the interpolation)
+        values = {"a": float(rng.normal()), "b": float(rng.uniform(0, 200))}
+        if step % 3 == 0:
+            values["c"] = float(rng.normal())   # a signal on every third frame only
+        history.push(t, values)
+        lookups = ((history.series, "a"), (history.series, "b"), (history.series, "c"), (history.series, "absent"),
+                   None)
+        for probe in (t + 0.02, t, t - 0.003, t - 0.05, -1.0, float(rng.uniform(0, t + 0.01))):
+            expected = tuple(history.value_at(probe, n) for n in ("a", "b", "c", "absent")) + (None,)
+            assert core.values_at(lookups, probe) == expected
+    with pytest.raises(TypeError):
+        core.values_at(((history.series,),), 0.1)

@@ -10,5 +10,7 @@ from setuptools import Extension, setup
 setup(ext_modules=[
     Extension("frictiond._fitcore", ["frictiond/_fitcore.c"], depends=["frictiond/_ccommon.h"], optional=True),
     Extension("frictiond._frontcore", ["frictiond/_frontcore.c"], depends=["frictiond/_ccommon.h"], optional=True),
-    Extension("frictiond._codeccore", ["frictiond/_codeccore.c"], optional=True),
+    # (no fused multiply-add: decoded values must be the Python path's to the last bit)
+    Extension("frictiond._codeccore", ["frictiond/_codeccore.c"], extra_compile_args=["-ffp-contract=off"],
+              optional=True),
 ])

@@ -1,9 +1,11 @@
 /*
- * The output codec's per-frame work, compiled: packing signal values into a classical (≤ 8 byte)
- * payload with shifts and masks, and the E2E counter + CRC. Knows CAN payloads, nothing of tyres.
+ * The codec's per-frame work, compiled: reading an input payload's mapped signals into SI units,
+ * packing output values into a classical (≤ 8 byte) payload with shifts and masks, and the E2E
+ * counter + CRC. Knows CAN payloads, nothing of tyres.
  *
- * Each function reproduces its Python twin in frictiond/codec.py (`_Packer.encode`'s shift-and-mask
- * path) and frictiond/e2e.py (`protect`) bit for bit; tests/test_codeccore.py holds them to it.
+ * Each function reproduces its Python twin in frictiond/codec.py (`InputCodec.decode`'s fast path,
+ * `_Packer.encode`'s shift-and-mask path) and frictiond/e2e.py (`protect`) bit for bit;
+ * tests/test_codeccore.py holds them to it.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -143,7 +145,116 @@ static PyObject *py_protect(PyObject *self, PyObject *args)
     return PyBytes_FromStringAndSize((const char *)out, n);
 }
 
+/* One signal read from an input payload, as codec._MessagePlan.compiled_spec packs it ("<2qQ2q2d"). */
+typedef struct {
+    int64_t little, shift;
+    uint64_t mask;
+    int64_t sign;         /* the sign bit's value for a signed field, else 0 */
+    int64_t identity;
+    double scale, offset; /* cantools' value = raw * scale + offset (identity: raw) */
+} InField;
+
+typedef struct {          /* a DBC range check ("<q2d") */
+    int64_t field;
+    double low, high;
+} InCheck;
+
+typedef struct {          /* a canonical value = (value * scale + offset) * factor ("<q3d") */
+    int64_t field;
+    double scale, offset, factor;
+} InSI;
+
+#define MAX_IN_FIELDS 64
+
+static PyObject *py_unpack_si(PyObject *self, PyObject *args)
+{
+    Py_buffer fields, checks, si, data;
+    PyObject *names;
+    Py_ssize_t counter;
+    if (!PyArg_ParseTuple(args, "y*y*y*O!ny*", &fields, &checks, &si, &PyTuple_Type, &names, &counter, &data))
+        return NULL;
+    PyObject *result = NULL, *values = NULL;
+    const Py_ssize_t nf = fields.len / (Py_ssize_t)sizeof(InField), nc = checks.len / (Py_ssize_t)sizeof(InCheck),
+                     ns = si.len / (Py_ssize_t)sizeof(InSI);
+    if (fields.len % (Py_ssize_t)sizeof(InField) || checks.len % (Py_ssize_t)sizeof(InCheck)
+        || si.len % (Py_ssize_t)sizeof(InSI) || ns != PyTuple_GET_SIZE(names) || nf > MAX_IN_FIELDS
+        || counter >= nf || data.len > 8) {
+        PyErr_SetString(PyExc_ValueError, "unpack_si: the tables, names and payload (≤ 8 bytes) do not agree");
+        goto done;
+    }
+    uint64_t little = 0, big = 0;
+    const unsigned char *bytes = data.buf;
+    for (Py_ssize_t i = 0; i < data.len; i++) {
+        little |= (uint64_t)bytes[i] << (8 * i);
+        big |= (uint64_t)bytes[i] << (8 * (data.len - 1 - i));
+    }
+    double value[MAX_IN_FIELDS];
+    int64_t raw_of[MAX_IN_FIELDS];
+    for (Py_ssize_t k = 0; k < nf; k++) {
+        InField f;
+        memcpy(&f, (const char *)fields.buf + k * (Py_ssize_t)sizeof(InField), sizeof f);
+        int64_t raw = (int64_t)(((f.little ? little : big) >> f.shift) & f.mask);
+        if (f.sign && (raw & f.sign))
+            raw -= f.sign << 1;
+        raw_of[k] = raw;
+        value[k] = f.identity ? (double)raw : (double)raw * f.scale + f.offset;
+    }
+    for (Py_ssize_t k = 0; k < nc; k++) {
+        InCheck c;
+        memcpy(&c, (const char *)checks.buf + k * (Py_ssize_t)sizeof(InCheck), sizeof c);
+        if (c.field < 0 || c.field >= nf || !(c.low <= value[c.field] && value[c.field] <= c.high)) {
+            result = Py_NewRef(Py_None);   /* refused: the Python path says why */
+            goto done;
+        }
+    }
+    values = PyDict_New();
+    if (!values)
+        goto done;
+    for (Py_ssize_t k = 0; k < ns; k++) {
+        InSI m;
+        memcpy(&m, (const char *)si.buf + k * (Py_ssize_t)sizeof(InSI), sizeof m);
+        if (m.field < 0 || m.field >= nf) {
+            PyErr_SetString(PyExc_ValueError, "unpack_si: a canonical value names no field");
+            goto done;
+        }
+        const double v = (value[m.field] * m.scale + m.offset) * m.factor;
+        if (!isfinite(v)) {
+            result = Py_NewRef(Py_None);
+            goto done;
+        }
+        PyObject *number = PyFloat_FromDouble(v);
+        if (!number || PyDict_SetItem(values, PyTuple_GET_ITEM(names, k), number) < 0) {
+            Py_XDECREF(number);
+            goto done;
+        }
+        Py_DECREF(number);
+    }
+    PyObject *counter_value;
+    if (counter < 0) {
+        counter_value = Py_NewRef(Py_None);
+    } else {
+        InField f;
+        memcpy(&f, (const char *)fields.buf + counter * (Py_ssize_t)sizeof(InField), sizeof f);
+        counter_value = f.identity ? PyLong_FromLongLong(raw_of[counter]) : PyFloat_FromDouble(value[counter]);
+        if (!counter_value)
+            goto done;
+    }
+    result = Py_BuildValue("(ON)", values, counter_value);
+done:
+    Py_XDECREF(values);
+    PyBuffer_Release(&fields);
+    PyBuffer_Release(&checks);
+    PyBuffer_Release(&si);
+    PyBuffer_Release(&data);
+    return result;
+}
+
 static PyMethodDef methods[] = {
+    {"unpack_si", py_unpack_si, METH_VARARGS,
+     "unpack_si(fields, checks, si, names, counter, data) -> (values, counter value) | None\n\n"
+     "InputCodec.decode's fast path for a classical payload: the mapped signals in SI units by\n"
+     "canonical name and the alive counter's value (None without one); None when a DBC range\n"
+     "check fails or a value is not finite (the Python path then raises the DecodeFailure)."},
     {"pack", py_pack, METH_VARARGS,
      "pack(spec, names, values, length) -> bytes | None\n\n"
      "codec._Packer.encode's shift-and-mask path for a message of ≤ 8 bytes; None when a value is\n"

@@ -231,7 +231,8 @@ def _scaler(conversion: Any) -> tuple[bool, Any, Any]:
 class _MessagePlan:
     """Everything needed to decode one input message quickly."""
 
-    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range", "to_si", "fields")
+    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range", "to_si", "fields",
+                 "compiled")
 
     def __init__(self, message: Any, signals: list[ResolvedSignal], is_trigger: bool) -> None:
         self.message = message
@@ -250,6 +251,7 @@ class _MessagePlan:
         # (DBC signal, canonical name, scale, offset, factor) of each mapped signal: `ResolvedSignal.to_si`.
         self.to_si = tuple((s.signal, s.name, s.scale, s.offset, s.factor) for s in signals)
         self.fields: tuple | None = None
+        self.compiled: tuple | None = None
 
     def compile(self, counter: Any | None) -> None:
         """Fast path: the signals this plan reads (mapped ones and the alive counter), as
@@ -268,6 +270,30 @@ class _MessagePlan:
                 sign = (1 << (sig.length - 1)) if sig.is_signed else 0
                 fields.append((sig.name, little, shift, mask, sign, identity, scale, offset))
             self.fields = tuple(fields)
+        self.compiled = self._compiled_spec(counter)
+
+    def _compiled_spec(self, counter: Any | None) -> tuple | None:
+        """`_codeccore.unpack_si`'s tables (all but the payload): for a classical payload read
+        with shifts and masks whose values a double holds exactly (fields of ≤ 52 bits, integer
+        scalings below 2**53), so that it computes what `unpack` and `to_si` compute; else None."""
+        if self.fields is None or self.length > 8:
+            return None
+        index = {}
+        fields = []
+        for k, (name, little, shift, mask, sign, identity, scale, offset) in enumerate(self.fields):
+            if mask.bit_length() > 52 or not all(isinstance(x, (int, float)) for x in (scale, offset)):
+                return None
+            if not identity and isinstance(scale, int) and isinstance(offset, int) and \
+                    mask * abs(scale) + abs(offset) >= 1 << 53:
+                return None
+            index[name] = k
+            fields.append(struct.pack("<2qQ2q2d", little, shift, mask, sign, identity, scale, offset))
+        checks = b"".join(struct.pack("<q2d", index[s.signal], low, high) for s, low, high in self.check_range)
+        si = b"".join(struct.pack("<q3d", index[signal], scale, offset, factor)
+                      for signal, _, scale, offset, factor in self.to_si)
+        names = tuple(name for _, name, _, _, _ in self.to_si)
+        counter_index = index.get(counter.name, -1) if counter is not None else -1
+        return b"".join(fields), checks, si, names, counter_index
 
     def unpack(self, data: bytes) -> dict[str, Any]:
         """The wanted signals' scaled values; identical to cantools' `decode(..., decode_choices=False)`."""
@@ -317,6 +343,7 @@ class InputCodec:
             plan.compile(self._counter_signals.get(fid))
         self._last_counter: dict[int, int] = {}
         self._encode_counters: dict[int, int] = {}
+        self.core = compiled_codec
 
     def counter_signal(self, message: str) -> str | None:
         """Name of the alive counter checked in an input message (None: the message has none)."""
@@ -352,6 +379,14 @@ class InputCodec:
         data = frame.data
         if len(data) != plan.length:
             raise DecodeFailure("wrong length", f"{plan.name} has {len(data)} bytes, DBC says {plan.length}")
+        if plan.compiled is not None and self.core is not None:
+            decoded = self.core.unpack_si(*plan.compiled, data)
+            if decoded is not None:
+                values, counter = decoded
+                if counter is not None:
+                    self._count(frame.can_id, counter)
+                return DecodedInput(frame.time_s, plan.name, values, plan.is_trigger)
+            # Refused (a range or a value): the Python path below says why.
         if plan.fields is not None:
             raw = plan.unpack(data)
         else:
@@ -382,8 +417,12 @@ class InputCodec:
         if signal is None:
             return
         value = raw.get(signal.name)
-        if value is None:
-            return
+        if value is not None:
+            self._count(frame_id, value)
+
+    def _count(self, frame_id: int, value: Any) -> None:
+        """Counts a jump of a message's alive counter (value: the counter signal's value)."""
+        signal = self._counter_signals[frame_id]
         counter = int(value)
         last = self._last_counter.get(frame_id)
         self._last_counter[frame_id] = counter

@@ -1,5 +1,5 @@
-"""The compiled output packing and E2E protection (`frictiond._codeccore`) against the Python
-packer, cantools' own encoder and `e2e.protect`."""
+"""The compiled codec (`frictiond._codeccore`) against its Python twins: input decoding
+(`InputCodec.decode`), output packing (`_Packer`, and cantools' own encoder) and `e2e.protect`."""
 from __future__ import annotations
 
 import math
@@ -9,10 +9,13 @@ import numpy as np
 import pytest
 
 from frictiond import codec as codec_module
-from frictiond.codec import OutputCodec, _limits, _Packer, load_databases
+from frictiond.codec import DecodeFailure, InputCodec, OutputCodec, _limits, _Packer, load_databases
 from frictiond.config import default_config_path, load_config
 from frictiond.e2e import protect
+from frictiond.frames import Frame
 from frictiond.samples import FrictionEstimate, PhysicalSample, Status
+
+from .conftest import REPO
 
 core = codec_module.compiled_codec
 needs_core = pytest.mark.skipif(core is None, reason="not built (test_the_compiled_codec_is_built fails instead)")
@@ -172,3 +175,60 @@ def test_output_frames_are_the_same_on_both_paths():
         assert compiled.encode_estimate(estimate) == floats.encode_estimate(estimate)
         assert compiled.encode_wheels(estimate, sample) == floats.encode_wheels(estimate, sample)
     assert compiled._counters == floats._counters
+
+
+def _decode_both(compiled, floats, frame):
+    """Both paths' verdicts on a frame: (values, message) or the DecodeFailure's text."""
+    out = []
+    for codec in (compiled, floats):
+        try:
+            decoded = codec.decode(frame)
+            out.append(None if decoded is None else (decoded.message, decoded.is_trigger, decoded.values))
+        except DecodeFailure as exc:
+            out.append(("failure", exc.reason, str(exc)))
+    return out
+
+
+@needs_core
+@pytest.mark.parametrize("config_path, marks_invalid_codes", [
+    (default_config_path(), False),   # (its ranges span each field: nothing to refuse)
+    (REPO / "config" / "examples" / "saloon_x.yaml", True),
+    (REPO / "config" / "examples" / "saloon_x_master_cylinder.yaml", True),
+])
+def test_decode_is_the_same_on_both_paths(config_path, marks_invalid_codes):
+    config = load_config(config_path)
+    db = load_databases(config.can.dbc, strict=config.can.dbc_strict)
+    compiled = InputCodec(db, config.signals, config.vehicle.wheel_radius)
+    floats = InputCodec(db, config.signals, config.vehicle.wheel_radius)
+    floats.core = None
+    plans = list(compiled._plans.values())
+    assert any(plan.compiled is not None for plan in plans)
+    rng = np.random.default_rng(14)
+    verdicts = {"ok": 0, "failure": 0}
+    for k in range(6000):
+        plan = plans[k % len(plans)]
+        kind = rng.integers(4)
+        if kind == 0:   # random bits: out-of-range codes and all
+            data = bytes(rng.integers(0, 256, plan.length, dtype=np.uint8))
+        elif kind == 1:  # all ones: the usual "invalid" code
+            data = b"\xff" * plan.length
+        else:           # a plausible frame: the simulator's encoder on random values in range
+            values = {s.name: float(rng.uniform(0, 30)) for s in plan.signals}
+            data = compiled.encode_input(plan.name, values)[0]
+        a, b = _decode_both(compiled, floats, Frame(0.01 * k, plan.frame_id, data))
+        assert a == b, (plan.name, data.hex())
+        verdicts["failure" if a[0] == "failure" else "ok"] += 1
+    assert verdicts["ok"] > 2000, verdicts
+    assert (verdicts["failure"] > 500) == marks_invalid_codes, verdicts
+    assert compiled.counter_jumps == floats.counter_jumps
+
+
+@needs_core
+def test_unpack_si_refuses_tables_that_do_not_agree():
+    config = load_config(default_config_path())
+    codec = InputCodec(load_databases(config.can.dbc), config.signals, config.vehicle.wheel_radius)
+    fields, checks, si, names, counter = next(p.compiled for p in codec._plans.values() if p.compiled)
+    with pytest.raises(ValueError):
+        core.unpack_si(fields, checks, si, names[:-1], counter, b"\x00" * 8)
+    with pytest.raises(ValueError):
+        core.unpack_si(fields, checks, si, names, counter, b"\x00" * 9)

@@ -45,36 +45,29 @@ static int as_double(PyObject *v, double *out)
     return -1;
 }
 
-static PyObject *py_pack(PyObject *self, PyObject *args)
+/* _Packer.encode's shift-and-mask path into out[0..length): 1 done, 0 the Python path must
+ * decide (a value that is not a plain number, a raw value outside its field), -1 an exception. */
+static int pack_into(const Py_buffer *spec, PyObject *names, PyObject *values, Py_ssize_t length, unsigned char *out)
 {
-    Py_buffer spec;
-    PyObject *names, *values;
-    Py_ssize_t length;
-    if (!PyArg_ParseTuple(args, "y*O!O!n", &spec, &PyTuple_Type, &names, &PyDict_Type, &values, &length))
-        return NULL;
-    const Py_ssize_t count = spec.len / (Py_ssize_t)sizeof(Field);
-    if (spec.len % (Py_ssize_t)sizeof(Field) || count != PyTuple_GET_SIZE(names) || length < 0 || length > 8) {
-        PyBuffer_Release(&spec);
+    const Py_ssize_t count = spec->len / (Py_ssize_t)sizeof(Field);
+    if (spec->len % (Py_ssize_t)sizeof(Field) || count != PyTuple_GET_SIZE(names) || length < 0 || length > 8) {
         PyErr_SetString(PyExc_ValueError, "pack: spec, names and length (≤ 8) do not agree");
-        return NULL;
+        return -1;
     }
     Field field;
     uint64_t big = 0, little = 0;
     for (Py_ssize_t k = 0; k < count; k++) {
-        memcpy(&field, (const char *)spec.buf + k * (Py_ssize_t)sizeof(Field), sizeof(Field));
+        memcpy(&field, (const char *)spec->buf + k * (Py_ssize_t)sizeof(Field), sizeof(Field));
         PyObject *name = PyTuple_GET_ITEM(names, k);
         PyObject *item = PyDict_GetItemWithError(values, name);
         if (!item) {
-            PyBuffer_Release(&spec);
             if (!PyErr_Occurred())
                 PyErr_SetObject(PyExc_KeyError, name);
-            return NULL;
+            return -1;
         }
         double value;
-        if (as_double(item, &value) < 0) {
-            PyBuffer_Release(&spec);
-            Py_RETURN_NONE;   /* not a plain number: the Python path decides */
-        }
+        if (as_double(item, &value) < 0)
+            return 0;
         if (value != value)
             value = field.lo;
         else {
@@ -85,20 +78,33 @@ static PyObject *py_pack(PyObject *self, PyObject *args)
         }
         /* nearbyint rounds half to even in the default mode, as Python's round() */
         const double raw = field.identity ? nearbyint(value) : nearbyint((value - field.offset) / field.scale);
-        if (!(raw >= (double)field.low && raw <= (double)field.high)) {
-            PyBuffer_Release(&spec);
-            Py_RETURN_NONE;   /* outside the field: cantools' own path reports it */
-        }
+        if (!(raw >= (double)field.low && raw <= (double)field.high))
+            return 0;
         const uint64_t bits = ((uint64_t)(int64_t)raw & field.mask) << field.shift;
         if (field.little)
             little |= bits;
         else
             big |= bits;
     }
-    PyBuffer_Release(&spec);
-    unsigned char out[8];
     for (Py_ssize_t i = 0; i < length; i++)
         out[i] = (unsigned char)(((little >> (8 * i)) | (big >> (8 * (length - 1 - i)))) & 0xFF);
+    return 1;
+}
+
+static PyObject *py_pack(PyObject *self, PyObject *args)
+{
+    Py_buffer spec;
+    PyObject *names, *values;
+    Py_ssize_t length;
+    if (!PyArg_ParseTuple(args, "y*O!O!n", &spec, &PyTuple_Type, &names, &PyDict_Type, &values, &length))
+        return NULL;
+    unsigned char out[8];
+    const int done = pack_into(&spec, names, values, length, out);
+    PyBuffer_Release(&spec);
+    if (done < 0)
+        return NULL;
+    if (!done)
+        Py_RETURN_NONE;
     return PyBytes_FromStringAndSize((const char *)out, length);
 }
 
@@ -114,27 +120,18 @@ static void make_crc_table(void)
     }
 }
 
-static PyObject *py_protect(PyObject *self, PyObject *args)
+/* e2e.protect on out[0..n): 0, or -1 with an exception. */
+static int protect_in_place(unsigned char *out, Py_ssize_t n, long long data_id, long long counter, long long counter_bit)
 {
-    Py_buffer payload;
-    long long data_id, counter, counter_bit;
-    if (!PyArg_ParseTuple(args, "Ly*LL", &data_id, &payload, &counter, &counter_bit))
-        return NULL;
-    const Py_ssize_t n = payload.len;
     const long long byte = counter_bit >= 0 ? counter_bit / 8 : -1;
-    if (n < 1 || byte < 0 || byte >= n || n > 64) {
-        PyBuffer_Release(&payload);
+    if (n < 1 || byte < 0 || byte >= n) {
         PyErr_SetString(PyExc_IndexError, "protect: counter or CRC byte outside the payload");
-        return NULL;
+        return -1;
     }
     if (counter_bit % 8 > 4) {
-        PyBuffer_Release(&payload);
         PyErr_SetString(PyExc_ValueError, "protect: the 4-bit counter would cross a byte boundary");
-        return NULL;
+        return -1;
     }
-    unsigned char out[64];
-    memcpy(out, payload.buf, (size_t)n);
-    PyBuffer_Release(&payload);
     const int shift = (int)(counter_bit % 8);
     out[byte] = (unsigned char)((out[byte] & ~(0x0F << shift) & 0xFF) | ((counter & 0x0F) << shift));
     unsigned crc = crc_table[0xFF ^ (data_id & 0xFF)];
@@ -142,7 +139,48 @@ static PyObject *py_protect(PyObject *self, PyObject *args)
     for (Py_ssize_t i = 1; i < n && i < 8; i++)
         crc = crc_table[crc ^ out[i]];
     out[0] = (unsigned char)(crc ^ 0xFF);
+    return 0;
+}
+
+static PyObject *py_protect(PyObject *self, PyObject *args)
+{
+    Py_buffer payload;
+    long long data_id, counter, counter_bit;
+    if (!PyArg_ParseTuple(args, "Ly*LL", &data_id, &payload, &counter, &counter_bit))
+        return NULL;
+    const Py_ssize_t n = payload.len;
+    unsigned char out[64];
+    if (n > 64) {
+        PyBuffer_Release(&payload);
+        PyErr_SetString(PyExc_ValueError, "protect: a payload of at most 64 bytes");
+        return NULL;
+    }
+    memcpy(out, payload.buf, (size_t)n);
+    PyBuffer_Release(&payload);
+    if (protect_in_place(out, n, data_id, counter, counter_bit) < 0)
+        return NULL;
     return PyBytes_FromStringAndSize((const char *)out, n);
+}
+
+static PyObject *py_encode_frame(PyObject *self, PyObject *args)
+{
+    Py_buffer spec;
+    PyObject *names, *values;
+    Py_ssize_t length;
+    long long data_id, counter, counter_bit;
+    if (!PyArg_ParseTuple(args, "y*O!O!nLLL", &spec, &PyTuple_Type, &names, &PyDict_Type, &values, &length,
+                          &data_id, &counter, &counter_bit))
+        return NULL;
+    unsigned char out[8];
+    const int done = pack_into(&spec, names, values, length, out);
+    PyBuffer_Release(&spec);
+    if (done < 0)
+        return NULL;
+    if (!done)
+        Py_RETURN_NONE;
+    if (protect_in_place(out, length, data_id, counter, counter_bit) < 0)
+        return NULL;
+    return PyBytes_FromStringAndSize((const char *)out, length);
 }
 
 /* One signal read from an input payload, as codec._MessagePlan.compiled_spec packs it ("<2qQ2q2d"). */
@@ -259,6 +297,9 @@ static PyMethodDef methods[] = {
      "pack(spec, names, values, length) -> bytes | None\n\n"
      "codec._Packer.encode's shift-and-mask path for a message of ≤ 8 bytes; None when a value is\n"
      "not a plain number or its raw value does not fit its field (the Python path handles those)."},
+    {"encode_frame", py_encode_frame, METH_VARARGS,
+     "encode_frame(spec, names, values, length, data_id, counter, counter_bit) -> bytes | None:\n"
+     "pack, then protect; None as pack."},
     {"protect", py_protect, METH_VARARGS,
      "protect(data_id, payload, counter, counter_bit) -> bytes: e2e.protect on a copy."},
     {NULL, NULL, 0, NULL},

@@ -643,6 +643,11 @@ class _Packer:
                 self._register(fields)
         return fields
 
+    def spec_for(self, values: Mapping[str, Any]) -> tuple[bytes, tuple[str, ...]] | None:
+        """`_codeccore`'s field table for the page these values select; None: the Python path."""
+        fields = self._fields(values) if self.root is not None else None
+        return self._specs.get(id(fields)) if fields is not None else None
+
     def _walk(self, node: tuple, values: Mapping[str, Any]) -> tuple | None:
         fields, muxes = node
         for name, lo, hi, pages in muxes:
@@ -733,13 +738,29 @@ class OutputCodec:
         }
         self.e2e = E2EChecker()
         self.core = compiled_codec
+        # The compiled field tables of the pages sent every update, looked up once: the
+        # estimate's, and each wheel's when its page is chosen by WheelIndex alone.
+        probe = {name: 0 for name in self._signals[self.estimate_id]}
+        self._estimate_spec = self._packers[self.estimate_id].spec_for(probe)
+        wheel_packer = self._packers[self.wheel_id]
+        muxes = wheel_packer.root[1] if wheel_packer.root is not None else ()
+        self._wheel_specs = [None] * len(WHEELS)
+        if all(name == "WheelIndex" for name, *_ in muxes):
+            probe = {name: 0 for name in self._signals[self.wheel_id]}
+            self._wheel_specs = [wheel_packer.spec_for({**probe, "WheelIndex": i}) for i in range(len(WHEELS))]
 
-    def _encode(self, frame_id: int, message: Any, values: dict[str, float]) -> bytes:
+    def _encode(self, frame_id: int, message: Any, values: dict[str, float], spec: tuple | None = None) -> bytes:
         extra = self._extra_values[frame_id]
         if extra:
             values.update(extra)
-        payload = self._packers[frame_id].encode(values)
         counter = self._counters[frame_id]
+        if spec is not None and self.core is not None:
+            payload = self.core.encode_frame(spec[0], spec[1], values, message.length, frame_id, counter,
+                                             self._counter_bit[frame_id])
+            if payload is not None:
+                self._counters[frame_id] = (counter + 1) & 0x0F
+                return payload
+        payload = self._packers[frame_id].encode(values)
         self._counters[frame_id] = (counter + 1) & 0x0F
         if self.core is not None and len(payload) > self._counter_bit[frame_id] // 8:
             return self.core.protect(frame_id, payload, counter, self._counter_bit[frame_id])
@@ -756,16 +777,17 @@ class OutputCodec:
         return self._encode(self.estimate_id, self.estimate_message, {
             "Crc": 0, "Counter": 0, "EstimatorStatus": status, "MuMax": mu, "SlipAtMuMax": slip,
             "Theta": theta, "Confidence": confidence,
-        })
+        }, self._estimate_spec)
 
     def encode_wheels(self, estimate: FrictionEstimate, sample: PhysicalSample) -> list[bytes]:
         payloads = []
-        for i in range(len(WHEELS)):
+        slips, mus_used, mus_max, loads = sample.slip, sample.mu_used, estimate.wheel_mu_max, sample.normal_force_n
+        for i, spec in enumerate(self._wheel_specs):
             payloads.append(self._encode(self.wheel_id, self.wheel_message, {
                 "Crc": 0, "Counter": 0, "WheelIndex": i,
-                "Slip": _finite(sample.slip[i]), "MuUsed": _finite(sample.mu_used[i]),
-                "MuMaxWheel": _finite(estimate.wheel_mu_max[i]), "NormalForce": _finite(sample.normal_force_n[i]),
-            }))
+                "Slip": _finite(slips[i]), "MuUsed": _finite(mus_used[i]),
+                "MuMaxWheel": _finite(mus_max[i]), "NormalForce": _finite(loads[i]),
+            }, spec))
         return payloads
 
     def decode_output(self, frame: Frame) -> dict[str, Any] | None:

@@ -111,6 +111,9 @@ def test_pack_is_bit_for_bit_the_python_packer_and_cantools(messages):
             spec = packer._specs.get(id(fields))
             if spec is not None and core.pack(*spec, values, packer.length) is not None:
                 compiled_counts[message.name] += 1
+                # packed and protected in one call: the same bytes as the two steps
+                assert core.encode_frame(*spec, values, packer.length, message.frame_id, 5, 12) == bytes(
+                    protect(message.frame_id, bytearray(core.pack(*spec, values, packer.length)), 5, 12))
             expected = floats.encode(values)
             assert packer.encode(values) == expected, (message.name, values)
             clipped = {name: codec_module._clamp(v, *packer.limits[name]) for name, v in values.items()}

@@ -1,9 +1,9 @@
 """Build of the compiled modules; everything else is in pyproject.toml.
 
-`frictiond._fitcore` (the estimator's per-update numerics) and `frictiond._frontcore` (the front
-end's derivative filter) and `frictiond._codeccore` (the output frames' packing and E2E
-protection) are optional: without a C compiler the install still succeeds and the
-same computations run in numpy and plain Python, several times slower.
+All are optional: `frictiond._fitcore` (the estimator's per-update numerics), `_frontcore` (the
+front end's derivative filter and interpolation), `_codeccore` (input decoding, output packing
+and E2E protection) and `_logcore` (reading candump lines). Without a C compiler the install
+still succeeds and the same computations run in numpy and plain Python, several times slower.
 """
 from setuptools import Extension, setup
 
@@ -13,4 +13,5 @@ setup(ext_modules=[
     # (no fused multiply-add: decoded values must be the Python path's to the last bit)
     Extension("frictiond._codeccore", ["frictiond/_codeccore.c"], extra_compile_args=["-ffp-contract=off"],
               optional=True),
+    Extension("frictiond._logcore", ["frictiond/_logcore.c"], optional=True),
 ])

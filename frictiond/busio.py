@@ -18,6 +18,13 @@ import can
 
 from .frames import Frame
 
+try:
+    # The common candump line parsed in C (setup.py builds it when a C compiler is there); the
+    # regular expression below is the fallback and the reference (tests/test_logcore.py).
+    from . import _logcore as compiled_log
+except ImportError:  # pragma: no cover - depends on the install
+    compiled_log = None
+
 log = logging.getLogger(__name__)
 
 SUPPORTED_LOG_SUFFIXES = (".log", ".asc", ".blf", ".csv", ".trc")
@@ -117,8 +124,14 @@ def _read_candump(path: Path) -> Iterator[Frame]:
     match = _CANDUMP_DATA_LINE.fullmatch
     fromhex = bytes.fromhex
     new_frame = tuple.__new__   # Frame(...) without its Python-level __new__ (half the cost)
+    parse = compiled_log.candump_frame if compiled_log is not None else None
     with path.open("r", encoding=encoding) as fh:
         for line in fh:
+            if parse is not None:
+                frame = parse(line, Frame)
+                if frame is not None:
+                    yield frame
+                    continue
             m = match(line)
             if m is not None:
                 time_string, id_string, data = m.groups()

@@ -91,23 +91,6 @@ static int pack_into(const Py_buffer *spec, PyObject *names, PyObject *values, P
     return 1;
 }
 
-static PyObject *py_pack(PyObject *self, PyObject *args)
-{
-    Py_buffer spec;
-    PyObject *names, *values;
-    Py_ssize_t length;
-    if (!PyArg_ParseTuple(args, "y*O!O!n", &spec, &PyTuple_Type, &names, &PyDict_Type, &values, &length))
-        return NULL;
-    unsigned char out[8];
-    const int done = pack_into(&spec, names, values, length, out);
-    PyBuffer_Release(&spec);
-    if (done < 0)
-        return NULL;
-    if (!done)
-        Py_RETURN_NONE;
-    return PyBytes_FromStringAndSize((const char *)out, length);
-}
-
 static unsigned char crc_table[256];
 
 static void make_crc_table(void)
@@ -162,25 +145,42 @@ static PyObject *py_protect(PyObject *self, PyObject *args)
     return PyBytes_FromStringAndSize((const char *)out, n);
 }
 
+/* pack_into's payload as bytes, protected first when e2e (data ID, counter, counter bit) is given;
+ * None as pack_into's 0. Releases the spec. */
+static PyObject *packed(Py_buffer *spec, PyObject *names, PyObject *values, Py_ssize_t length, const long long *e2e)
+{
+    unsigned char out[8];
+    const int done = pack_into(spec, names, values, length, out);
+    PyBuffer_Release(spec);
+    if (done < 0)
+        return NULL;
+    if (!done)
+        Py_RETURN_NONE;
+    if (e2e && protect_in_place(out, length, e2e[0], e2e[1], e2e[2]) < 0)
+        return NULL;
+    return PyBytes_FromStringAndSize((const char *)out, length);
+}
+
+static PyObject *py_pack(PyObject *self, PyObject *args)
+{
+    Py_buffer spec;
+    PyObject *names, *values;
+    Py_ssize_t length;
+    if (!PyArg_ParseTuple(args, "y*O!O!n", &spec, &PyTuple_Type, &names, &PyDict_Type, &values, &length))
+        return NULL;
+    return packed(&spec, names, values, length, NULL);
+}
+
 static PyObject *py_encode_frame(PyObject *self, PyObject *args)
 {
     Py_buffer spec;
     PyObject *names, *values;
     Py_ssize_t length;
-    long long data_id, counter, counter_bit;
+    long long e2e[3];   /* data ID, counter, counter bit */
     if (!PyArg_ParseTuple(args, "y*O!O!nLLL", &spec, &PyTuple_Type, &names, &PyDict_Type, &values, &length,
-                          &data_id, &counter, &counter_bit))
+                          &e2e[0], &e2e[1], &e2e[2]))
         return NULL;
-    unsigned char out[8];
-    const int done = pack_into(&spec, names, values, length, out);
-    PyBuffer_Release(&spec);
-    if (done < 0)
-        return NULL;
-    if (!done)
-        Py_RETURN_NONE;
-    if (protect_in_place(out, length, data_id, counter, counter_bit) < 0)
-        return NULL;
-    return PyBytes_FromStringAndSize((const char *)out, length);
+    return packed(&spec, names, values, length, e2e);
 }
 
 /* One signal read from an input payload, as codec._MessagePlan.compiled_spec packs it ("<2qQ2q2d"). */

@@ -2,10 +2,11 @@
 frames handed to the bus, for `frictiond run`'s Daemon on python-can's virtual bus.
 
 Simulated ABS stops are played onto the bus at real-time pace (so the loop is idle between
-frames as on a car), and every trigger frame's handling time is recorded. As a floor, the same
-measurement for a loop that only decodes the frame with the codec. In the same run: the same
-frames through a Pipeline back to back (the work without the idle gaps and the bus), and how much
-slower this machine runs a fixed workload right after sleeping than back to back.
+frames as on a car), and every trigger frame's handling time is recorded, with the part spent in
+`bus.send`. As a floor, the same measurement for a loop that only decodes the frame with the
+codec. In the same run: the same frames through a Pipeline back to back (the work without the
+idle gaps and the bus) and at the same pace (sleeping in between, no bus), and how much slower
+this machine runs a fixed workload right after sleeping than back to back.
 
     python benchmarks/latency.py [--scenarios dry,wet,snow] [--pace 1.0]
 """
@@ -34,14 +35,23 @@ class TimedDaemon(Daemon):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.latencies: list[float] = []
+        self.sending: list[float] = []
         self.decode_only: list[float] = []
+        self._send_s = 0.0
+
+    def _send(self, frames):  # type: ignore[override]
+        t0 = time.perf_counter()
+        super()._send(frames)
+        self._send_s += time.perf_counter() - t0
 
     def _handle(self, msg):  # type: ignore[override]
         if msg.arbitration_id != self.trigger_id:
             return super()._handle(msg)
+        self._send_s = 0.0
         t0 = time.perf_counter()
         super()._handle(msg)
         self.latencies.append(time.perf_counter() - t0)
+        self.sending.append(self._send_s)
         # floor: what merely decoding this frame costs
         from frictiond.busio import message_to_frame
 
@@ -76,13 +86,19 @@ def idle_penalty(period_s: float, runs: int = 300) -> tuple[float, float]:
             percentile(timings[True], 99) / percentile(timings[False], 99))
 
 
-def back_to_back(config, drives) -> list[float]:
-    """The pipeline's handling of each trigger frame of the same drives, back to back (µs)."""
+def pipeline_alone(config, drives, pace: float | None) -> list[float]:
+    """The pipeline's handling of each trigger frame of the same drives (µs), without the daemon
+    and the bus: back to back (pace None), or at the drive's pace, sleeping in between."""
     pipeline = Pipeline(config)
     trigger = pipeline.input_codec.trigger_id
     times = []
     for frames in drives:
+        base, start = frames[0].time_s, time.perf_counter()
         for f in frames:
+            if pace is not None:
+                delay = (f.time_s - base) / pace - (time.perf_counter() - start)
+                if delay > 0:
+                    time.sleep(delay)
             t0 = time.perf_counter()
             pipeline.process(f)
             if f.can_id == trigger:
@@ -99,7 +115,8 @@ def main(argv=None) -> int:
     # Simulated before the daemon starts (and freezes what exists, `Daemon._serve`): the sender
     # then only sends, and its allocations do not set off collections inside the daemon's thread.
     drives = [simulate_frames(config, name, seed=k)[0] for k, name in enumerate(args.scenarios.split(","))]
-    warm = back_to_back(config, drives)
+    warm = pipeline_alone(config, drives, None)
+    paced = pipeline_alone(config, drives, args.pace)
     penalty = idle_penalty(0.01 / args.pace)
     channel = f"frictiond-bench-{uuid.uuid4().hex[:8]}"
     daemon = TimedDaemon(config, overrides=Overrides(interface="virtual", channel=channel), install_signals=False)
@@ -121,15 +138,19 @@ def main(argv=None) -> int:
         thread.join(10)
         vehicle.shutdown()
     lat = [v * 1e6 for v in daemon.latencies]
+    send = [v * 1e6 for v in daemon.sending]
     dec = [v * 1e6 for v in daemon.decode_only]
     print(f"trigger frames handled: {len(lat)}")
     print(f"arrival → outputs sent: median {statistics.median(lat):7.1f} µs  p99 {percentile(lat, 99):7.1f} µs  "
           f"max {max(lat):7.1f} µs")
+    print(f"  of which bus.send of the outputs: median {statistics.median(send):7.1f} µs  p99 {percentile(send, 99):7.1f} µs")
     print(f"floor (decode only):    median {statistics.median(dec):7.1f} µs  p99 {percentile(dec, 99):7.1f} µs")
     print(f"ratio median latency / decode: {statistics.median(lat) / statistics.median(dec):.1f}x; "
           f"p99 is {percentile(lat, 99) / 10_000 * 100:.1f} % of the 10 ms bus period")
     print(f"same trigger frames back to back (Pipeline.process, no bus): median {statistics.median(warm):7.1f} µs  "
           f"p99 {percentile(warm, 99):7.1f} µs")
+    print(f"same trigger frames at the same pace (Pipeline.process, no bus): median {statistics.median(paced):7.1f} µs  "
+          f"p99 {percentile(paced, 99):7.1f} µs")
     print(f"this machine after sleeping between frames: a fixed workload runs {penalty[0]:.2f}x slower "
           f"(median), {penalty[1]:.2f}x (p99) than back to back")
     return 0

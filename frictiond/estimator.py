@@ -320,7 +320,7 @@ class _Window:
 
     def drop_before(self, time_s: float) -> None:
         times = self.time[self.start:self.end]
-        self.start += int(np.searchsorted(times, time_s, side="left"))
+        self.start += int(times.searchsorted(time_s, side="left"))
 
     def view(self) -> tuple[np.ndarray, ...]:
         s = slice(self.start, self.end)
@@ -575,7 +575,7 @@ class LugreTrustRegionEstimator:
         offset of the newest residuals far beyond the noise.
         """
         o = self.options
-        first = int(np.searchsorted(times, now_s - o.jump_window_s, side="left"))   # (times ascend)
+        first = int(times.searchsorted(now_s - o.jump_window_s, side="left"))   # (times ascend)
         n_recent = len(times) - first
         if n_recent < 8 or self._fits < 5 or len(times) - n_recent < 2 * n_recent:
             return 0.0
@@ -1023,8 +1023,7 @@ class LugreTrustRegionEstimator:
         """Index of the first window sample weighted above the excitation window's threshold
         (the newest `excitation_window_s`); the weights rise along the window."""
         o = self.options
-        return int(np.searchsorted(weights, math.exp(-o.excitation_window_s / o.forgetting_time_constant),
-                                   side="right"))
+        return int(weights.searchsorted(math.exp(-o.excitation_window_s / o.forgetting_time_constant), side="right"))
 
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""

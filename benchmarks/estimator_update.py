@@ -155,6 +155,9 @@ def main(argv=None) -> int:
     ratio_same = statistics.median(scipy_full) / statistics.median(compared_updates)
     print(f"ratio least_squares / estimator update (median): {ratio_update:6.1f}x   "
           f"p99: {percentile(scipy_full, 99) / percentile(braking_updates, 99):6.1f}x")
+    per_round = [statistics.median(r["scipy_full"]) / statistics.median(r["fitting"]) for r in rounds]
+    print(f"  the same ratio within each round (both series seconds apart): "
+          f"{', '.join(f'{x:.1f}x' for x in per_round)}; median of rounds {statistics.median(per_round):.1f}x")
     print(f"estimator update on the refitted updates {summary_us(compared_updates)}")
     print(f"ratio least_squares / estimator update, same updates (median): {ratio_same:6.1f}x   "
           f"p99: {percentile(scipy_full, 99) / percentile(compared_updates, 99):6.1f}x")

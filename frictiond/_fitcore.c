@@ -1105,7 +1105,61 @@ out:
     return result;
 }
 
+/* _Window.append for several samples of one instant, at index k of the window's columns. */
+static PyObject *py_append_samples(PyObject *self, PyObject *args)
+{
+    PyObject *slip_o, *speed_o, *mu_o, *time_o, *wheel_o, *lam_v_o, *pow_o, *stiff_o, *slips_o, *mus_o, *wheels_o;
+    Py_ssize_t k;
+    double speed, time_s, alpha, patch_length, max_slip;
+    if (!PyArg_ParseTuple(args, "(OOOOOOOO)nOdOdOddd", &slip_o, &speed_o, &mu_o, &time_o, &wheel_o, &lam_v_o,
+                          &pow_o, &stiff_o, &k, &slips_o, &speed, &mus_o, &time_s, &wheels_o, &alpha, &patch_length,
+                          &max_slip))
+        return NULL;
+    double slips[MAX_POINTS], mus[MAX_POINTS], wheels[MAX_POINTS];
+    const Py_ssize_t n = floats(slips_o, slips, "slips");
+    if (n < 0 || floats(mus_o, mus, "mus") != n || floats(wheels_o, wheels, "wheels") != n) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "append_samples: slips, mus and wheels differ in length");
+        return NULL;
+    }
+    Buf b[8] = {{0}};
+    PyObject *objs[8] = {slip_o, speed_o, mu_o, time_o, wheel_o, lam_v_o, pow_o, stiff_o};
+    for (int j = 0; j < 8; j++) {
+        if (get_array(objs[j], &b[j], "columns", -1, 1, j == 4) < 0) {
+            release_all(b, 8);
+            return NULL;
+        }
+        if (k < 0 || k + n > b[j].view.len / b[j].view.itemsize) {
+            release_all(b, 8);
+            PyErr_SetString(PyExc_IndexError, "append_samples: past the end of the window's columns");
+            return NULL;
+        }
+    }
+    double *slip_a = b[0].view.buf, *speed_a = b[1].view.buf, *mu_a = b[2].view.buf, *time_a = b[3].view.buf;
+    Py_ssize_t *wheel_a = b[4].view.buf;
+    double *lam_v_a = b[5].view.buf, *pow_a = b[6].view.buf, *stiff_a = b[7].view.buf;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const Py_ssize_t at = k + i;
+        const double lam = max_slip < slips[i] ? max_slip : slips[i];   /* min(slip, MAX_MODEL_SLIP) */
+        const double lam_v = lam * speed;
+        slip_a[at] = slips[i];
+        speed_a[at] = speed;
+        mu_a[at] = mus[i];
+        time_a[at] = time_s;
+        wheel_a[at] = (Py_ssize_t)wheels[i];
+        lam_v_a[at] = lam_v;
+        pow_a[at] = lam_v > 0 ? pow(lam_v, alpha) : 0.0;
+        stiff_a[at] = patch_length * lam / (1.0 - lam);
+    }
+    release_all(b, 8);
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
+    {"append_samples", py_append_samples, METH_VARARGS,
+     "append_samples(columns, k, slips, speed, mus, time_s, wheels, alpha, patch_length, max_slip) -> None\n\n"
+     "_Window.append of one instant's samples (one per wheel) at index k of the window's 8 columns\n"
+     "(slip, speed, mu, time, wheel, lam_v, pow_lam_v, stiff)."},
     {"solve", py_solve, METH_VARARGS,
      "solve(pow_lam_v, stiff, lam_v, mu, wheel, sw, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
      "      r_data, r_work, (mu_c, dmu, alpha, sc4, sc5, sc6), radius, max_iterations, ftol, xtol, gtol,\n"

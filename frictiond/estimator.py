@@ -295,19 +295,26 @@ class _Window:
         t = self.last_time_by_axle[axle]
         return t > since_s and self.end > self.start and t >= self.time[self.start]
 
+    def _compact(self) -> None:
+        """Move the window's samples to the front of the columns."""
+        n = len(self)
+        s, e = self.start, self.end
+        for arr in (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v, self.stiff):
+            arr[:n] = arr[s:e]
+        self.rows[:, :n] = self.rows[:, s:e]
+        self.core_rows[:n] = self.core_rows[s:e]
+        self.cached_end = max(self.cached_end - s, 0)
+        self.core_cached_end = max(self.core_cached_end - s, 0)
+        self.start, self.end = 0, n
+
     def append(self, slip: float, speed: float, mu: float, time_s: float, wheel: int) -> None:
         if self.end == self.capacity:
-            n = len(self)
-            s, e = self.start, self.end
-            for arr in (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v, self.stiff):
-                arr[:n] = arr[s:e]
-            self.rows[:, :n] = self.rows[:, s:e]
-            self.core_rows[:n] = self.core_rows[s:e]
-            self.cached_end = max(self.cached_end - s, 0)
-            self.core_cached_end = max(self.core_cached_end - s, 0)
-            self.start, self.end = 0, n
-            if n == self.capacity:  # full: drop the oldest quarter
-                self.drop_before(self.time[self.capacity // 4])
+            self._compact()
+            if self.end == self.capacity:
+                # Full (a long window_s at a high rate): the oldest quarter goes, and its room
+                # is made free again.
+                self.start = self.capacity // 4
+                self._compact()
         k = self.end
         self.slip[k], self.speed[k], self.mu[k], self.time[k], self.wheel[k] = slip, speed, mu, time_s, wheel
         lam = min(slip, MAX_MODEL_SLIP)
@@ -317,6 +324,21 @@ class _Window:
         self.stiff[k] = self.patch_length * lam / (1.0 - lam)
         self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
         self.end += 1
+
+    def append_instant(self, slips: list[float], speed: float, mus: list[float], time_s: float,
+                       wheels: list[int], core: Any = None) -> None:
+        """`append` of one instant's samples (a few wheels), in one compiled call when `core` is given."""
+        n = len(slips)
+        if core is None or self.end + n > self.capacity:
+            for slip, mu, wheel in zip(slips, mus, wheels):
+                self.append(slip, speed, mu, time_s, wheel)
+            return
+        core.append_samples((self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v,
+                             self.stiff), self.end, slips, speed, mus, time_s, wheels, self.alpha,
+                            self.patch_length, MAX_MODEL_SLIP)
+        for wheel in wheels:
+            self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
+        self.end += n
 
     def drop_before(self, time_s: float) -> None:
         times = self.time[self.start:self.end]
@@ -502,12 +524,17 @@ class LugreTrustRegionEstimator:
         if total_load > 0 and min(loads) >= 0:   # (a NaN load makes the sum NaN: fails the first)
             self._load_share = [f / total_load for f in loads]
         scales = None
+        slips, mus, wheels = [], [], []
         for i, (slip, usable, mu_used) in enumerate(zip(sample.slip, sample.usable, sample.mu_used)):
             if usable and slip >= o.min_slip and math.isfinite(mu_used):
                 if scales is None:
                     scales = (self._axle_scale(0), self._axle_scale(2))
-                window.append(slip, v, mu_used * scales[i >= 2], t, i)
-                added += 1
+                slips.append(slip)
+                mus.append(mu_used * scales[i >= 2])
+                wheels.append(i)
+        if slips:
+            window.append_instant(slips, v, mus, t, wheels, self.core)
+            added = len(slips)
         if added and fresh:
             self._new_event()
         last = self._last_estimate

@@ -347,3 +347,17 @@ def test_a_one_cycle_dip_of_the_fit_is_not_counted_again_a_drift_window_later():
     assert confidence[dip_t] < 0.7 * settled            # the dip itself is not trusted
     later = round(dip_t + o.drift_window_s, 2)
     assert min(confidence[round(later + d, 2)] for d in (-0.02, -0.01, 0.0, 0.01, 0.02)) > 0.95 * settled
+
+
+def test_a_full_window_drops_its_oldest_quarter_and_keeps_taking_samples():
+    # A long window_s at a high update rate fills the preallocated columns; appending must go on
+    # (it failed with an IndexError once the columns were full).
+    from frictiond.estimator import _Window
+
+    w = _Window(capacity=16)
+    for k in range(40):
+        w.append(0.01 * (k + 1), 20.0, 0.5, 0.001 * k, k % 4)
+        assert len(w) <= 16
+    slip, _, _, times, wheel = w.view()
+    assert len(w) >= 12 and times[-1] == pytest.approx(0.039) and wheel[-1] == 39 % 4
+    assert list(times) == sorted(times) and slip[-1] == pytest.approx(0.40)

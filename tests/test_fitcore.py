@@ -362,3 +362,31 @@ def test_the_row_cache_gives_the_uncached_result_and_is_ignored_at_another_point
     np.testing.assert_array_equal(other[0], fresh[0])
     with pytest.raises(ValueError, match="cached_n"):
         solve(x0, ((rows, x0, m + 1),))
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_append_instant_fills_the_window_as_append_does():
+    from frictiond.estimator import _Window
+
+    rng = np.random.default_rng(41)
+    compiled, floats = _Window(capacity=64, alpha=0.6, patch_length=0.18), _Window(capacity=64, alpha=0.6,
+                                                                                  patch_length=0.18)
+    for step in range(200):   # (past the capacity several times: the compaction path too)
+        wheels = sorted(rng.choice(4, size=int(rng.integers(1, 5)), replace=False).tolist())
+        slips = [float(rng.choice([rng.uniform(0.0, 0.3), 0.0, 0.99, 1.5])) for _ in wheels]
+        mus = [float(rng.uniform(-0.2, 1.2)) for _ in wheels]
+        speed, t = float(rng.uniform(0.0, 40.0)), 0.01 * step
+        compiled.append_instant(slips, speed, mus, t, wheels, core)
+        floats.append_instant(slips, speed, mus, t, wheels, None)
+        if step % 9 == 0:
+            compiled.drop_before(t - 0.15)
+            floats.drop_before(t - 0.15)
+        assert (compiled.start, compiled.end, compiled.last_time_by_axle) == (floats.start, floats.end,
+                                                                             floats.last_time_by_axle)
+        for name in ("slip", "speed", "mu", "time", "wheel", "lam_v", "pow_lam_v", "stiff"):
+            np.testing.assert_array_equal(getattr(compiled, name)[compiled.start:compiled.end],
+                                          getattr(floats, name)[floats.start:floats.end], err_msg=name)
+    with pytest.raises(IndexError):
+        core.append_samples((compiled.slip, compiled.speed, compiled.mu, compiled.time, compiled.wheel, compiled.lam_v,
+                             compiled.pow_lam_v, compiled.stiff), 63, [0.1, 0.1], 10.0, [0.5, 0.5], 1.0, [0, 1],
+                            0.5, 0.2, 0.98)

@@ -367,6 +367,10 @@ class LugreTrustRegionEstimator:
         # over ~50 ms. Counts fixed for 10 ms asked a 20 ms car for twice the time.
         self._min_wheel_samples = max(5, round(0.1 / sample_period_s))
         self._runaway_lag = max(2, round(0.05 / sample_period_s))
+        # Room for a whole window at twice the expected rate, four wheels a sample (a window
+        # that outgrows it loses its oldest quarter); bounded so that a window_s of hours does not
+        # preallocate gigabytes.
+        self._window_capacity = int(min(max(4096.0, 8 * o.window_s / sample_period_s + 64), 1 << 17))
         # x: ln θ per wheel, then σ0, v_s, σ2 divided by their nominal values.
         self._scale = np.array([1.0] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, max(o.prior_sigma2, 1e-3)])
         self._lb = np.array([math.log(o.theta_min)] * N_WHEELS + [o.sigma0_min, o.v_s_min, o.sigma2_min]) / self._scale
@@ -409,7 +413,7 @@ class LugreTrustRegionEstimator:
         self._prior = self._saved_prior.copy() if self._saved_prior is not None else nominal
         self._x = self._prior.copy()
         self._radius: float | None = None
-        self._window = _Window(alpha=o.alpha, patch_length=o.patch_length)
+        self._window = _Window(self._window_capacity, alpha=o.alpha, patch_length=o.patch_length)
         self._cache_x: np.ndarray | None = None
         self._core_rows_x: np.ndarray | None = None
         self._last_valid: FrictionEstimate | None = None

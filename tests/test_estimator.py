@@ -361,3 +361,9 @@ def test_a_full_window_drops_its_oldest_quarter_and_keeps_taking_samples():
     slip, _, _, times, wheel = w.view()
     assert len(w) >= 12 and times[-1] == pytest.approx(0.039) and wheel[-1] == 39 % 4
     assert list(times) == sorted(times) and slip[-1] == pytest.approx(0.40)
+
+
+@pytest.mark.parametrize("window_s, period_s", [(0.8, 0.01), (20.0, 0.004), (60.0, 0.02)])
+def test_the_window_has_room_for_window_s_of_four_wheels(window_s, period_s):
+    est = LugreTrustRegionEstimator(dataclasses.replace(LugreTROptions(), window_s=window_s), sample_period_s=period_s)
+    assert est._window.capacity >= 4 * window_s / period_s

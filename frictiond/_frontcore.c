@@ -127,35 +127,26 @@ out:
 /* matched(ts, vs, times, weights, floor) -> Σ_k weights_k·x(times_k), x interpolated linearly
  * in the series (ts, vs) and held beyond its ends, as FrontEnd._matched with
  * frontend._interpolation_plan; with a floor, each series value v counts as max(0, v − floor). */
-static PyObject *py_matched(PyObject *self, PyObject *args)
+/* FrontEnd._matched of one series (o_ts, o_vs) over the window's times and weights: *total
+ * (each value less floor_value and clipped at 0 when has_floor). 0, or -1 with an exception. */
+static int matched_sum(PyObject *o_ts, PyObject *o_vs, const double *times, const double *w, Py_ssize_t nt,
+                       int has_floor, double floor_value, double *total_out)
 {
-    (void)self;
-    PyObject *o_ts, *o_vs, *o_times, *o_w, *o_floor;
-    if (!PyArg_ParseTuple(args, "OOOOO:matched", &o_ts, &o_vs, &o_times, &o_w, &o_floor))
-        return NULL;
-    double floor_value = 0.0;
-    const int has_floor = o_floor != Py_None;
-    if (has_floor) {
-        floor_value = PyFloat_AsDouble(o_floor);
-        if (floor_value == -1.0 && PyErr_Occurred())
-            return NULL;
-    }
-    Py_ssize_t ns, nv, nt, nw;
-    double *ts = NULL, *vs = NULL, *times = NULL, *w = NULL, *coef = NULL;
+    Py_ssize_t ns, nv;
+    double *ts = NULL, *vs = NULL, *coef = NULL;
     Py_ssize_t *order = NULL;
-    PyObject *result = NULL;
-    if (!(ts = floats_of(o_ts, &ns, "ts")) || !(vs = floats_of(o_vs, &nv, "vs")) ||
-        !(times = floats_of(o_times, &nt, "times")) || !(w = floats_of(o_w, &nw, "weights")))
+    char *seen = NULL;
+    int status = -1;
+    if (!(ts = floats_of(o_ts, &ns, "ts")) || !(vs = floats_of(o_vs, &nv, "vs")))
         goto out;
-    if (ns != nv || ns < 1 || nt != nw) {
-        PyErr_SetString(PyExc_ValueError, "matched: ts and vs (non-empty), times and weights pairwise of one length");
+    if (ns != nv || ns < 1) {
+        PyErr_SetString(PyExc_ValueError, "matched: ts and vs (non-empty) of one length");
         goto out;
     }
     coef = PyMem_Calloc((size_t)ns, sizeof(double));
     order = PyMem_Malloc((size_t)(ns + 1) * sizeof(Py_ssize_t));
-    char *seen = PyMem_Calloc((size_t)ns, 1);
+    seen = PyMem_Calloc((size_t)ns, 1);
     if (!coef || !order || !seen) {
-        PyMem_Free(seen);
         PyErr_NoMemory();
         goto out;
     }
@@ -188,7 +179,6 @@ static PyObject *py_matched(PyObject *self, PyObject *args)
         ADD(k, wt * f);
     }
 #undef ADD
-    PyMem_Free(seen);
     double total = 0.0;
     for (Py_ssize_t i = 0; i < n_order; i++) {
         const Py_ssize_t j = order[i];
@@ -197,15 +187,103 @@ static PyObject *py_matched(PyObject *self, PyObject *args)
         else if (vs[j] > floor_value)
             total += coef[j] * (vs[j] - floor_value);
     }
-    result = PyFloat_FromDouble(total);
+    *total_out = total;
+    status = 0;
 out:
     PyMem_Free(ts);
     PyMem_Free(vs);
-    PyMem_Free(times);
-    PyMem_Free(w);
     PyMem_Free(coef);
     PyMem_Free(order);
+    PyMem_Free(seen);
+    return status;
+}
+
+/* The window's times and weights as two equal-length float buffers (PyMem); -1 with an exception. */
+static int window_of(PyObject *o_times, PyObject *o_w, double **times, double **w, Py_ssize_t *n)
+{
+    Py_ssize_t nw;
+    *times = *w = NULL;
+    if (!(*times = floats_of(o_times, n, "times")) || !(*w = floats_of(o_w, &nw, "weights")))
+        return -1;
+    if (*n != nw) {
+        PyErr_SetString(PyExc_ValueError, "matched: times and weights of one length");
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *py_matched(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_ts, *o_vs, *o_times, *o_w, *o_floor;
+    if (!PyArg_ParseTuple(args, "OOOOO:matched", &o_ts, &o_vs, &o_times, &o_w, &o_floor))
+        return NULL;
+    const int has_floor = o_floor != Py_None;
+    double floor_value = 0.0;
+    if (has_floor && (floor_value = PyFloat_AsDouble(o_floor)) == -1.0 && PyErr_Occurred())
+        return NULL;
+    double *times, *w, total = 0.0;
+    Py_ssize_t nt;
+    PyObject *result = NULL;
+    if (window_of(o_times, o_w, &times, &w, &nt) == 0
+        && matched_sum(o_ts, o_vs, times, w, nt, has_floor, floor_value, &total) == 0)
+        result = PyFloat_FromDouble(total);
+    PyMem_Free(times);
+    PyMem_Free(w);
     return result;
+}
+
+/* matched for several signals: ((series dict, name, floor or None) | None, ...) -> tuple of float | None. */
+static PyObject *py_matched_many(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *lookups, *o_times, *o_w;
+    if (!PyArg_ParseTuple(args, "O!OO:matched_many", &PyTuple_Type, &lookups, &o_times, &o_w))
+        return NULL;
+    double *times, *w;
+    Py_ssize_t nt;
+    PyObject *out = NULL;
+    if (window_of(o_times, o_w, &times, &w, &nt) < 0)
+        goto done;
+    const Py_ssize_t count = PyTuple_GET_SIZE(lookups);
+    if (!(out = PyTuple_New(count)))
+        goto done;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *series, *name, *o_floor, *value = NULL;
+        if (lookup == Py_None) {
+            PyTuple_SET_ITEM(out, i, Py_NewRef(Py_None));
+            continue;
+        }
+        if (!PyArg_ParseTuple(lookup, "O!OO:matched_many", &PyDict_Type, &series, &name, &o_floor))
+            goto fail;
+        const int has_floor = o_floor != Py_None;
+        double floor_value = 0.0, total = 0.0;
+        if (has_floor && (floor_value = PyFloat_AsDouble(o_floor)) == -1.0 && PyErr_Occurred())
+            goto fail;
+        PyObject *pair = PyDict_GetItemWithError(series, name);
+        if (!pair) {
+            if (PyErr_Occurred())
+                goto fail;
+            value = Py_NewRef(Py_None);   /* no series yet: the caller's fallback */
+        } else {
+            if (!PyTuple_Check(pair) || PyTuple_GET_SIZE(pair) != 2) {
+                PyErr_SetString(PyExc_TypeError, "matched_many: a series is a (times, values) pair");
+                goto fail;
+            }
+            if (matched_sum(PyTuple_GET_ITEM(pair, 0), PyTuple_GET_ITEM(pair, 1), times, w, nt, has_floor, floor_value,
+                            &total) < 0
+                || !(value = PyFloat_FromDouble(total)))
+                goto fail;
+        }
+        PyTuple_SET_ITEM(out, i, value);
+    }
+    goto done;
+fail:
+    Py_CLEAR(out);
+done:
+    PyMem_Free(times);
+    PyMem_Free(w);
+    return out;
 }
 
 /* _MessageHistory.value_at for one signal: its (times, values) deques at time t; a new reference. */
@@ -296,6 +374,9 @@ static PyMethodDef methods[] = {
     {"matched", py_matched, METH_VARARGS,
      "matched(ts, vs, times, weights, floor) -> float: FrontEnd._matched's weighted sum of a series\n"
      "interpolated at the window's times (floor: None, or subtracted and clipped at 0 per value)."},
+    {"matched_many", py_matched_many, METH_VARARGS,
+     "matched_many(lookups, times, weights) -> tuple: `matched` of each (series dict, name, floor or None)\n"
+     "of lookups (or None); None for a signal without a series yet."},
     {"values_at", py_values_at, METH_VARARGS,
      "values_at(lookups, t) -> tuple: for each (series dict, name) of lookups (or None), what\n"
      "_MessageHistory.value_at(t, name) gives: None when the signal has no series yet."},

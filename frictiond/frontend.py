@@ -222,6 +222,13 @@ class FrontEnd:
                                + (("yaw_rate",) if self._has_yaw_rate else ()))
         self._sample_lookups = tuple((self._source[n].series, n) if n in self._source else None
                                      for n in self._sample_inputs)
+        # The same for the filter-matched sums (`_matched_inputs`): pressures less the push-out
+        # pressure, then the body's acceleration.
+        pushout = vehicle.brake_pushout_pressure
+        self._matched_lookups = tuple(
+            (self._source[n].series, n, floor) if n in self._source else None
+            for n, floor in [(name, pushout) for name in PRESSURE_NAMES] + [("accel_long", None)])
+        self._brake_gains = [vehicle.brake_gain(i) for i in range(4)]
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -433,6 +440,16 @@ class FrontEnd:
         return [veh.brake_gain(i) * self._matched(name, p, plans, pushout)
                 for i, (name, p) in enumerate(zip(PRESSURE_NAMES, pressures))]
 
+    def _matched_inputs(self, pressures: list[float], accel_long_raw: float) -> tuple[list[float], float]:
+        """`_matched_brake_torques` and `_matched_value("accel_long", …)` (one compiled call when built)."""
+        if self.core is None or self._torque_weights is None:
+            return self._matched_brake_torques(pressures), self._matched_value("accel_long", accel_long_raw)
+        matched = self.core.matched_many(self._matched_lookups, self._wheel_times, self._torque_weights)
+        pushout = self.vehicle.brake_pushout_pressure
+        torques = [gain * (m if m is not None else max(0.0, p - pushout))
+                   for gain, m, p in zip(self._brake_gains, matched, pressures)]
+        return torques, (matched[4] if matched[4] is not None else accel_long_raw)
+
     def _matched_value(self, name: str, fallback: float) -> float:
         return fallback if self._torque_weights is None else self._matched(name, fallback, {}, None)
 
@@ -535,11 +552,11 @@ class FrontEnd:
             yaw_rate = accel_lat / speed if speed > opts.min_speed else 0.0
 
         loads = veh.normal_forces(accel_long, accel_lat)
-        brake_torques = self._matched_brake_torques(pressures)
+        brake_torques, accel_long_matched = self._matched_inputs(pressures, accel_long_raw)
         inertia_torques = [veh.wheel_inertia * float(a) for a in omega_dot]
         if opts.brake_gain_correction and not glitch:
             # The body's deceleration through the same filter as the torques it is compared with.
-            self._update_brake_gain(self._matched_value("accel_long", accel_long_raw) - self._accel_bias_mps2,
+            self._update_brake_gain(accel_long_matched - self._accel_bias_mps2,
                                     speed, inertia_torques, brake_torques, drive)
         gain = self._brake_gain_factor
 

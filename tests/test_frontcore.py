@@ -119,3 +119,23 @@ def test_values_at_is_value_at_for_every_signal():
             assert core.values_at(lookups, probe) == expected
     with pytest.raises(TypeError):
         core.values_at(((history.series,),), 0.1)
+
+
+@needs_core
+def test_matched_many_is_matched_for_each_signal():
+    rng = np.random.default_rng(22)
+    history = frontend_module._MessageHistory(0.01)
+    for step in range(30):
+        history.push(0.01 * step + float(rng.uniform(-0.003, 0.003)),
+                     {"p": float(rng.uniform(0, 80)), "a": float(rng.normal())})
+    times = sorted(float(t) for t in rng.uniform(0.1, 0.32, 7))
+    weights = [float(w) for w in rng.normal(size=7)]
+    lookups = ((history.series, "p", 2.5), (history.series, "a", None), (history.series, "absent", 1.0), None,
+               (history.series, "p", float("nan")))
+    expected = (core.matched(*history.series["p"], times, weights, 2.5),
+                core.matched(*history.series["a"], times, weights, None), None, None,
+                core.matched(*history.series["p"], times, weights, float("nan")))
+    assert core.matched_many(lookups, times, weights) == expected
+    assert expected[4] == 0.0   # (a NaN floor: no value exceeds it, as in the float code)
+    with pytest.raises(ValueError):
+        core.matched_many(lookups, times, weights[:-1])

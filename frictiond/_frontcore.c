@@ -367,6 +367,50 @@ static PyObject *py_values_at(PyObject *self, PyObject *args)
     return out;
 }
 
+static PyObject *deque_append;   /* collections.deque.append, called on the series' deques */
+
+/* _MessageHistory.push's loop: each value into `merged` and onto its (times, values) deques. */
+static PyObject *py_push_values(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *series, *merged, *time_s, *values, *new_pair;
+    if (!PyArg_ParseTuple(args, "O!O!O!O!O:push_values", &PyDict_Type, &series, &PyDict_Type, &merged,
+                          &PyFloat_Type, &time_s, &PyDict_Type, &values, &new_pair))
+        return NULL;
+    Py_ssize_t pos = 0;
+    PyObject *name, *value;
+    while (PyDict_Next(values, &pos, &name, &value)) {
+        if (PyDict_SetItem(merged, name, value) < 0)
+            return NULL;
+        PyObject *pair = PyDict_GetItemWithError(series, name);   /* borrowed */
+        if (!pair) {
+            if (PyErr_Occurred())
+                return NULL;
+            PyObject *fresh = PyObject_CallNoArgs(new_pair);
+            if (!fresh)
+                return NULL;
+            const int stored = PyDict_SetItem(series, name, fresh);
+            Py_DECREF(fresh);   /* (the dict holds it) */
+            if (stored < 0)
+                return NULL;
+            pair = fresh;
+        }
+        if (!PyTuple_Check(pair) || PyTuple_GET_SIZE(pair) != 2) {
+            PyErr_SetString(PyExc_TypeError, "push_values: a series is a (times, values) pair");
+            return NULL;
+        }
+        PyObject *call_t[2] = {PyTuple_GET_ITEM(pair, 0), time_s}, *call_v[2] = {PyTuple_GET_ITEM(pair, 1), value};
+        PyObject *r = PyObject_Vectorcall(deque_append, call_t, 2, NULL);
+        if (!r)
+            return NULL;
+        Py_DECREF(r);
+        if (!(r = PyObject_Vectorcall(deque_append, call_v, 2, NULL)))
+            return NULL;
+        Py_DECREF(r);
+    }
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"fit_wheels", py_fit_wheels, METH_VARARGS,
      "fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights) | None\n\n"
@@ -377,6 +421,9 @@ static PyMethodDef methods[] = {
     {"matched_many", py_matched_many, METH_VARARGS,
      "matched_many(lookups, times, weights) -> tuple: `matched` of each (series dict, name, floor or None)\n"
      "of lookups (or None); None for a signal without a series yet."},
+    {"push_values", py_push_values, METH_VARARGS,
+     "push_values(series, merged, time_s, values, new_pair) -> None: _MessageHistory.push's loop\n"
+     "(new_pair() makes the (times, values) deques of a signal seen for the first time)."},
     {"values_at", py_values_at, METH_VARARGS,
      "values_at(lookups, t) -> tuple: for each (series dict, name) of lookups (or None), what\n"
      "_MessageHistory.value_at(t, name) gives: None when the signal has no series yet."},
@@ -389,5 +436,16 @@ static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_frontcore",
 
 PyMODINIT_FUNC PyInit__frontcore(void)
 {
+    PyObject *collections = PyImport_ImportModule("collections");
+    if (!collections)
+        return NULL;
+    PyObject *deque = PyObject_GetAttrString(collections, "deque");
+    Py_DECREF(collections);
+    if (!deque)
+        return NULL;
+    deque_append = PyObject_GetAttrString(deque, "append");
+    Py_DECREF(deque);
+    if (!deque_append)
+        return NULL;
     return PyModule_Create(&module);
 }

@@ -116,6 +116,11 @@ class FrontEndResult:
     dead_wheels: tuple[int, ...] = ()
 
 
+def _new_series() -> tuple[deque[float], deque[float]]:
+    """A signal's (times, values) history: the newest 16 of each."""
+    return deque(maxlen=16), deque(maxlen=16)
+
+
 class _MessageHistory:
     """The last few values of one input message, for interpolation and staleness.
 
@@ -131,17 +136,21 @@ class _MessageHistory:
         self.last_arrival_s = -math.inf
         self.merged: dict[str, float] = {}
 
-    def push(self, time_s: float, values: Mapping[str, float]) -> None:
+    def push(self, time_s: float, values: Mapping[str, float], core: Any = None) -> None:
         series = self.series
         if time_s < self.last_arrival_s:
             # Time went backwards (log splice, clock step): the old history means nothing now.
             series.clear()
+        if core is not None and type(time_s) is float and type(values) is dict:
+            core.push_values(series, self.merged, time_s, values, _new_series)
+            self.last_arrival_s = time_s
+            return
         merged = self.merged
         for name, value in values.items():
             merged[name] = value
             pair = series.get(name)
             if pair is None:
-                pair = series[name] = (deque(maxlen=16), deque(maxlen=16))
+                pair = series[name] = _new_series()
             pair[0].append(time_s)
             pair[1].append(value)
         self.last_arrival_s = time_s
@@ -305,7 +314,7 @@ class FrontEnd:
                 # splices do this): skip it rather than restart the derivative filter.
                 self.skipped_triggers += 1
                 return None
-        history.push(time_s, values)
+        history.push(time_s, values, self.core)
         if message != self.trigger_message:
             return None
         return self._on_trigger(time_s, history)

@@ -139,3 +139,20 @@ def test_matched_many_is_matched_for_each_signal():
     assert expected[4] == 0.0   # (a NaN floor: no value exceeds it, as in the float code)
     with pytest.raises(ValueError):
         core.matched_many(lookups, times, weights[:-1])
+
+
+@needs_core
+def test_history_push_is_the_same_on_both_paths():
+    rng = np.random.default_rng(23)
+    compiled, floats = frontend_module._MessageHistory(0.01), frontend_module._MessageHistory(0.01)
+    t = 0.0
+    for step in range(80):
+        t += float(rng.choice([0.01, 0.01, 0.01, -0.05]))   # now and then back in time: cleared
+        names = ["a", "b"] + (["c"] if step > 20 else []) + (["d"] if step % 5 == 0 else [])
+        values = {name: float(rng.normal()) for name in names}
+        compiled.push(t, values, core)
+        floats.push(t, values, None)
+        assert compiled.merged == floats.merged and compiled.last_arrival_s == floats.last_arrival_s
+        assert {n: (list(ts), list(vs)) for n, (ts, vs) in compiled.series.items()} == \
+               {n: (list(ts), list(vs)) for n, (ts, vs) in floats.series.items()}
+    assert all(ts.maxlen == 16 for ts, _ in compiled.series.values())

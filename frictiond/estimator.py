@@ -1058,7 +1058,7 @@ class LugreTrustRegionEstimator:
 
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""
-        lam_hi = np.where(np.isfinite(self._slip_support), self._slip_support, 1e-3)
+        lam_hi = [s if math.isfinite(s) else 1e-3 for s in self._slip_support.tolist()]
         mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
         return mu
 
@@ -1086,8 +1086,8 @@ class LugreTrustRegionEstimator:
         why = self.excitation_reasons = ["", "", "", ""]
         fit_at_hi = self._fit_at_high_slip(speed)
         # A θ held at its bound is not where the data put it: its peak proves nothing.
-        at_bound = ((self._x[:N_WHEELS] - self._lb[:N_WHEELS] < 1e-6)
-                    | (self._ub[:N_WHEELS] - self._x[:N_WHEELS] < 1e-6)).tolist()
+        at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, lb, ub in
+                    zip(self._x[:N_WHEELS].tolist(), self._lb[:N_WHEELS].tolist(), self._ub[:N_WHEELS].tolist())]
         for i in range(N_WHEELS):
             if at_bound[i]:
                 why[i] = "θ at its bound"

@@ -4,7 +4,9 @@
  * `FrontEnd._fit_wheels` (the derivative filter: a local quadratic fit of the four wheel
  * speeds over the window, its glitch test and the torque weights matched to it) and the
  * weighted sums of `FrontEnd._matched` (a signal interpolated at the window's times, weighted
- * as the filter weights the wheel's acceleration). The Python code stays the reference and
+ * as the filter weights the wheel's acceleration; several signals at once), the interpolation of
+ * a sample's inputs (`_MessageHistory.value_at`, batched) and `_MessageHistory.push`'s loop
+ * (each decoded value onto its signal's history). The Python code stays the reference and
  * the fallback where no compiler was available at install (tests compare the two).
  * Pure numerics: nothing of CAN, nothing of the tyre model.
  */

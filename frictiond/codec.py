@@ -21,8 +21,8 @@ from .frontend import OPTIONAL_INPUTS, REQUIRED_INPUTS
 from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
 
 try:
-    # Output packing and E2E protection compiled (setup.py builds it when a C compiler is there);
-    # `_Packer.encode`'s Python path and `e2e.protect` are the fallback and the reference.
+    # Input decoding, output packing and E2E protection compiled (setup.py builds it when a C
+    # compiler is there); the Python paths below and `e2e.protect` are the fallback and the reference.
     from . import _codeccore as compiled_codec
 except ImportError:  # pragma: no cover - depends on the install
     compiled_codec = None

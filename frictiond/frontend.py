@@ -27,8 +27,9 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 try:
-    # The derivative filter's fit compiled (setup.py builds it when a C compiler is there); the
-    # float code of `_fit_wheels` below is the fallback and the reference (tests compare).
+    # The derivative filter's fit, the inputs' interpolation and matched sums and the history
+    # pushes compiled (setup.py builds it when a C compiler is there); the float code below is
+    # the fallback and the reference (tests/test_frontcore.py compares).
     from . import _frontcore as compiled_front
 except ImportError:  # pragma: no cover - depends on the install
     compiled_front = None

@@ -296,7 +296,8 @@ static PyMethodDef methods[] = {
     {"pack", py_pack, METH_VARARGS,
      "pack(spec, names, values, length) -> bytes | None\n\n"
      "codec._Packer.encode's shift-and-mask path for a message of ≤ 8 bytes; None when a value is\n"
-     "not a plain number or its raw value does not fit its field (the Python path handles those)."},
+     "not a plain number or its raw value does not fit its field (the Python path handles those).\n"
+     "With protect, the two steps of encode_frame, each held to its Python twin by the tests."},
     {"encode_frame", py_encode_frame, METH_VARARGS,
      "encode_frame(spec, names, values, length, data_id, counter, counter_bit) -> bytes | None:\n"
      "pack, then protect; None as pack."},

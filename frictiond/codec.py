@@ -532,15 +532,14 @@ class _Packer:
         self._flat: dict[tuple, tuple] | None = None
         if self.root is not None and not any(sub[1] for _, _, _, pages in self.root[1] for sub in pages.values()):
             self._flat = {}
-        # `_codeccore.pack`'s field tables, by id() of the field tuples they were built from (only
+        # `_codeccore`'s field tables, by id() of the field tuples they were built from (only
         # tuples this packer keeps for its lifetime: the root's, and the flattened pages').
-        self.core = compiled_codec
         self._specs: dict[int, tuple[bytes, tuple[str, ...]]] = {}
         if self.root is not None and not self.root[1]:
             self._register(self.root[0])
 
     def _register(self, fields: tuple) -> None:
-        """Build `_codeccore.pack`'s field table for a page: a classical payload whose fields all
+        """Build `_codeccore.encode_frame`'s field table for a page: a classical payload whose fields all
         use linear or identity integer conversions of ≤ 52 bits (raw values a double holds
         exactly); other pages keep to the Python path."""
         if self.length > 8:
@@ -586,12 +585,6 @@ class _Packer:
         if self.root is not None:
             fields = self._fields(values)
         if fields is not None:
-            if self.core is not None and type(values) is dict:
-                spec = self._specs.get(id(fields))
-                if spec is not None:
-                    payload = self.core.pack(spec[0], spec[1], values, self.length)
-                    if payload is not None:
-                        return payload
             big = little_word = 0  # the payload read as a big-endian and as a little-endian integer
             for name, lo, hi, scale, offset, to_raw, little, shift, mask, low, high in fields:
                 value = values[name]
@@ -738,33 +731,38 @@ class OutputCodec:
         }
         self.e2e = E2EChecker()
         self.core = compiled_codec
-        # The compiled field tables of the pages sent every update, looked up once: the
-        # estimate's, and each wheel's when its page is chosen by WheelIndex alone.
-        probe = {name: 0 for name in self._signals[self.estimate_id]}
-        self._estimate_spec = self._packers[self.estimate_id].spec_for(probe)
-        wheel_packer = self._packers[self.wheel_id]
-        muxes = wheel_packer.root[1] if wheel_packer.root is not None else ()
-        self._wheel_specs = [None] * len(WHEELS)
-        if all(name == "WheelIndex" for name, *_ in muxes):
-            probe = {name: 0 for name in self._signals[self.wheel_id]}
-            self._wheel_specs = [wheel_packer.spec_for({**probe, "WheelIndex": i}) for i in range(len(WHEELS))]
+        # The compiled field tables of the pages sent every update, looked up once where the
+        # values cannot change the page: the estimate's when it has no multiplexer, each wheel's
+        # when WheelIndex alone chooses it. Any other page is looked up per frame (`_encode`).
+        self._estimate_spec = self._fixed_spec(self.estimate_id, {})
+        self._wheel_specs = [self._fixed_spec(self.wheel_id, {"WheelIndex": i}) for i in range(len(WHEELS))]
+
+    def _fixed_spec(self, frame_id: int, chosen: dict[str, int]) -> tuple | None:
+        """The compiled field table of the page that the multiplexer values `chosen` select,
+        when those are all the message's multiplexers; None: looked up per frame."""
+        packer = self._packers[frame_id]
+        if packer.root is None or any(name not in chosen for name, *_ in packer.root[1]):
+            return None
+        return packer.spec_for({**{name: 0 for name in self._signals[frame_id]}, **chosen})
 
     def _encode(self, frame_id: int, message: Any, values: dict[str, float], spec: tuple | None = None) -> bytes:
+        """One frame's payload with its counter and CRC: compiled when its page has a field table
+        (`spec`, or the packer's for these values), else the Python packer and `e2e.protect`."""
         extra = self._extra_values[frame_id]
         if extra:
             values.update(extra)
         counter = self._counters[frame_id]
-        if spec is not None and self.core is not None:
-            payload = self.core.encode_frame(spec[0], spec[1], values, message.length, frame_id, counter,
-                                             self._counter_bit[frame_id])
-            if payload is not None:
-                self._counters[frame_id] = (counter + 1) & 0x0F
-                return payload
-        payload = self._packers[frame_id].encode(values)
         self._counters[frame_id] = (counter + 1) & 0x0F
-        if self.core is not None and len(payload) > self._counter_bit[frame_id] // 8:
-            return self.core.protect(frame_id, payload, counter, self._counter_bit[frame_id])
-        return bytes(protect(frame_id, bytearray(payload), counter, self._counter_bit[frame_id]))
+        packer = self._packers[frame_id]
+        if self.core is not None:
+            if spec is None:
+                spec = packer.spec_for(values)
+            if spec is not None:
+                payload = self.core.encode_frame(spec[0], spec[1], values, message.length, frame_id, counter,
+                                                 self._counter_bit[frame_id])
+                if payload is not None:
+                    return payload
+        return bytes(protect(frame_id, bytearray(packer.encode(values)), counter, self._counter_bit[frame_id]))
 
     def encode_estimate(self, estimate: FrictionEstimate) -> bytes:
         status = int(estimate.status)

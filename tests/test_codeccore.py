@@ -102,20 +102,18 @@ def test_pack_is_bit_for_bit_the_python_packer_and_cantools(messages):
     compiled_counts = {}
     for message in messages:
         packer = _packer(message)
-        floats = _packer(message)
-        floats.core = None
         compiled_counts[message.name] = 0
         for _ in range(400):
             values = _values(rng, message, packer)
-            fields = packer._fields(values) if packer.root is not None else None
-            spec = packer._specs.get(id(fields))
-            if spec is not None and core.pack(*spec, values, packer.length) is not None:
+            expected = packer.encode(values)   # the Python packer
+            spec = packer.spec_for(values)
+            packed = core.pack(*spec, values, packer.length) if spec is not None else None
+            if packed is not None:
                 compiled_counts[message.name] += 1
+                assert packed == expected, (message.name, values)
                 # packed and protected in one call: the same bytes as the two steps
                 assert core.encode_frame(*spec, values, packer.length, message.frame_id, 5, 12) == bytes(
-                    protect(message.frame_id, bytearray(core.pack(*spec, values, packer.length)), 5, 12))
-            expected = floats.encode(values)
-            assert packer.encode(values) == expected, (message.name, values)
+                    protect(message.frame_id, bytearray(expected), 5, 12))
             clipped = {name: codec_module._clamp(v, *packer.limits[name]) for name, v in values.items()}
             assert expected == bytes(message.encode(clipped, scaling=True, strict=False, padding=False)), values
     # The compiled path took the plain layouts nearly always, never the ones it must leave alone.
@@ -164,8 +162,6 @@ def test_output_frames_are_the_same_on_both_paths():
     compiled = OutputCodec(load_databases([config.can.output_dbc]))
     floats = OutputCodec(load_databases([config.can.output_dbc]))
     floats.core = None
-    for packer in floats._packers.values():
-        packer.core = None
     rng = np.random.default_rng(13)
     for k in range(300):
         mu = float(rng.choice([rng.uniform(-0.5, 2.5), math.nan]))
@@ -235,3 +231,24 @@ def test_unpack_si_refuses_tables_that_do_not_agree():
         core.unpack_si(fields, checks, si, names[:-1], counter, b"\x00" * 8)
     with pytest.raises(ValueError):
         core.unpack_si(fields, checks, si, names, counter, b"\x00" * 9)
+
+
+@needs_core
+def test_a_multiplexed_estimate_message_is_packed_page_by_page(tmp_path):
+    # A vehicle's output DBC may put signals of FRICTION_ESTIMATE on pages of a multiplexer:
+    # each frame must be packed by the page its own values select.
+    text = (REPO / "dbc" / "frictiond.dbc").read_text()
+    for old, new in ((" SG_ EstimatorStatus : 12|4@1+", " SG_ EstimatorStatus M : 12|4@1+"),
+                     (" SG_ Confidence : 54|8@1+", " SG_ Confidence m3 : 54|8@1+")):
+        assert old in text
+        text = text.replace(old, new, 1)
+    path = tmp_path / "out.dbc"
+    path.write_text(text)
+    compiled, floats = OutputCodec(load_databases([path])), OutputCodec(load_databases([path]))
+    floats.core = None
+    for status in Status:
+        estimate = FrictionEstimate(0.0, status, 0.8, 0.1, 1.0, 0.9)
+        data = compiled.encode_estimate(estimate)
+        assert data == floats.encode_estimate(estimate), status
+        decoded = compiled.decode_output(Frame(0.0, compiled.estimate_id, data))
+        assert decoded["e2e"] == "ok" and ("Confidence" in decoded) == (status == Status.VALID)

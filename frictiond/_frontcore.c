@@ -6,7 +6,8 @@
  * weighted sums of `FrontEnd._matched` (a signal interpolated at the window's times, weighted
  * as the filter weights the wheel's acceleration; several signals at once), the interpolation of
  * a sample's inputs (`_MessageHistory.value_at`, batched) and `_MessageHistory.push`'s loop
- * (each decoded value onto its signal's history). The Python code stays the reference and
+ * (each decoded value onto its signal's history), and the rest of a sample's physics
+ * (`sample_physics`: `FrontEnd._compute_sample` from the inputs on). The Python code stays the reference and
  * the fallback where no compiler was available at install (tests compare the two).
  * Pure numerics: nothing of CAN, nothing of the tyre model.
  */
@@ -413,6 +414,604 @@ static PyObject *py_push_values(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* ---------------------------------------------------------------------------------------------
+ * sample_physics: FrontEnd._compute_sample after the fit and the inputs' interpolation (the
+ * range checks, dead and stuck wheels, the speed observer, the accelerometer offset, the load
+ * transfer, the brake-gain check against the body equation and each wheel's slip and μ), on the
+ * FrontEnd's own attributes. Each step mirrors its Python method line by line, including
+ * Python's min/max on NaN (the first argument is kept unless the second compares beyond it).
+ */
+
+/* The per-sample constants, in the order of frontend._PHYSICS_CONSTANTS. */
+enum {
+    K_STUCK_FRAMES, K_PUSHOUT, K_MIN_BRAKE_PRESSURE, K_MIN_SPEED, K_DEAD_RATIO, K_DEAD_S, K_DEAD_UNBRAKED_S,
+    K_MAX_GAP, K_UNEXPLAINED_DECEL, K_RADIUS, K_GAIN_FREE, K_GAIN_UP, K_GAIN_DOWN, K_MIN_BRAKED_SLIP,
+    K_MAX_ALL_WHEEL_SLIP, K_SAMPLE_PERIOD, K_BIAS_TAU, K_MASS, K_CG_HEIGHT, K_CG_FRONT, K_CG_REAR, K_TRACK_FRONT,
+    K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
+    K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
+    K_COUNT
+};
+
+#define MAX_ABS_ACCEL 30.0
+#define MAX_PRESSURE 350.0
+#define MAX_SPEED 120.0
+#define FREE_ROLLING_SPREAD 0.04
+#define FREE_ROLLING_ACCEL 2.0
+#define BRAKE_MODEL_MARGIN 1.25
+#define BRAKE_MODEL_WINDOW 0.2
+#define GRAVITY 9.80665
+
+/* Python's max(a, b) and min(a, b) for floats: a unless b compares beyond it. */
+static inline double py_max(double a, double b) { return b > a ? b : a; }
+static inline double py_min(double a, double b) { return b < a ? b : a; }
+
+/* The FrontEnd attributes sample_physics reads and writes. */
+static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
+    *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn, *A_recent_tt,
+    *A_recent_far, *A_gain_factor, *A_model_holds;
+
+typedef struct {
+    long repeats[NW];
+    int dead[NW];
+    int has_low_since[NW];
+    double low_since[NW], low_unbraked[NW];
+    int has_last_sample, has_speed_time, has_speed_est;
+    double last_sample, bias, unexplained, speed_time, speed_est;
+    long bias_samples, ref_disagreements;
+    double gain_tt, gain_tn, recent_tt, recent_far, gain_factor;
+    int model_holds;
+} FEState;
+
+static int get_float_attr(PyObject *obj, PyObject *name, double *out, int *present)
+{
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (!v)
+        return -1;
+    if (present && v == Py_None) {
+        *present = 0;
+        *out = 0.0;
+        Py_DECREF(v);
+        return 0;
+    }
+    *out = PyFloat_AsDouble(v);
+    Py_DECREF(v);
+    if (*out == -1.0 && PyErr_Occurred())
+        return -1;
+    if (present)
+        *present = 1;
+    return 0;
+}
+
+static int get_long_attr(PyObject *obj, PyObject *name, long *out)
+{
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (!v)
+        return -1;
+    *out = PyLong_AsLong(v);
+    Py_DECREF(v);
+    return (*out == -1 && PyErr_Occurred()) ? -1 : 0;
+}
+
+static int get_bool_attr(PyObject *obj, PyObject *name, int *out)
+{
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (!v)
+        return -1;
+    *out = PyObject_IsTrue(v);
+    Py_DECREF(v);
+    return *out < 0 ? -1 : 0;
+}
+
+/* A 4-list attribute (the per-wheel state lists), borrowed from the object's reference. */
+static PyObject *list_attr(PyObject *obj, PyObject *name)
+{
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (!v)
+        return NULL;
+    if (!PyList_Check(v) || PyList_GET_SIZE(v) != NW) {
+        PyErr_Format(PyExc_TypeError, "sample_physics: %U must be a list of four", name);
+        Py_DECREF(v);
+        return NULL;
+    }
+    return v;
+}
+
+static int load_state(PyObject *fe, FEState *s)
+{
+    PyObject *repeats = NULL, *dead = NULL, *since = NULL, *unbraked = NULL;
+    int rc = -1;
+    if (!(repeats = list_attr(fe, A_repeats)) || !(dead = list_attr(fe, A_dead)) || !(since = list_attr(fe, A_low_since))
+        || !(unbraked = list_attr(fe, A_low_unbraked)))
+        goto out;
+    for (int i = 0; i < NW; i++) {
+        if ((s->repeats[i] = PyLong_AsLong(PyList_GET_ITEM(repeats, i))) == -1 && PyErr_Occurred())
+            goto out;
+        if ((s->dead[i] = PyObject_IsTrue(PyList_GET_ITEM(dead, i))) < 0)
+            goto out;
+        PyObject *t = PyList_GET_ITEM(since, i);
+        s->has_low_since[i] = t != Py_None;
+        s->low_since[i] = s->has_low_since[i] ? PyFloat_AsDouble(t) : 0.0;
+        s->low_unbraked[i] = PyFloat_AsDouble(PyList_GET_ITEM(unbraked, i));
+        if (PyErr_Occurred())
+            goto out;
+    }
+    if (get_float_attr(fe, A_last_sample, &s->last_sample, &s->has_last_sample) < 0
+        || get_float_attr(fe, A_bias, &s->bias, NULL) < 0 || get_long_attr(fe, A_bias_samples, &s->bias_samples) < 0
+        || get_float_attr(fe, A_unexplained, &s->unexplained, NULL) < 0
+        || get_float_attr(fe, A_speed_time, &s->speed_time, &s->has_speed_time) < 0
+        || get_float_attr(fe, A_speed_est, &s->speed_est, &s->has_speed_est) < 0
+        || get_long_attr(fe, A_ref_disagreements, &s->ref_disagreements) < 0
+        || get_float_attr(fe, A_gain_tt, &s->gain_tt, NULL) < 0 || get_float_attr(fe, A_gain_tn, &s->gain_tn, NULL) < 0
+        || get_float_attr(fe, A_recent_tt, &s->recent_tt, NULL) < 0
+        || get_float_attr(fe, A_recent_far, &s->recent_far, NULL) < 0
+        || get_float_attr(fe, A_gain_factor, &s->gain_factor, NULL) < 0
+        || get_bool_attr(fe, A_model_holds, &s->model_holds) < 0)
+        goto out;
+    rc = 0;
+out:
+    Py_XDECREF(repeats);
+    Py_XDECREF(dead);
+    Py_XDECREF(since);
+    Py_XDECREF(unbraked);
+    return rc;
+}
+
+/* obj.name = value (a new reference, consumed; NULL passes the error on). */
+static int set_attr_new(PyObject *obj, PyObject *name, PyObject *value)
+{
+    if (!value)
+        return -1;
+    const int rc = PyObject_SetAttr(obj, name, value);
+    Py_DECREF(value);
+    return rc;
+}
+
+static PyObject *float_or_none(int present, double v)
+{
+    return present ? PyFloat_FromDouble(v) : Py_NewRef(Py_None);
+}
+
+/* What sample_physics changed, written back (the lists in place, as the Python code does). */
+static int store_state(PyObject *fe, const FEState *s)
+{
+    PyObject *dead = NULL, *since = NULL, *unbraked = NULL;
+    int rc = -1;
+    if (!(dead = list_attr(fe, A_dead)) || !(since = list_attr(fe, A_low_since))
+        || !(unbraked = list_attr(fe, A_low_unbraked)))
+        goto out;
+    for (int i = 0; i < NW; i++) {
+        PyObject *t = float_or_none(s->has_low_since[i], s->low_since[i]), *u = PyFloat_FromDouble(s->low_unbraked[i]);
+        if (!t || !u) {
+            Py_XDECREF(t);
+            Py_XDECREF(u);
+            goto out;
+        }
+        PyList_SetItem(dead, i, PyBool_FromLong(s->dead[i]));
+        PyList_SetItem(since, i, t);
+        PyList_SetItem(unbraked, i, u);
+    }
+    if (set_attr_new(fe, A_last_sample, float_or_none(s->has_last_sample, s->last_sample)) < 0
+        || set_attr_new(fe, A_bias, PyFloat_FromDouble(s->bias)) < 0
+        || set_attr_new(fe, A_bias_samples, PyLong_FromLong(s->bias_samples)) < 0
+        || set_attr_new(fe, A_unexplained, PyFloat_FromDouble(s->unexplained)) < 0
+        || set_attr_new(fe, A_speed_time, float_or_none(s->has_speed_time, s->speed_time)) < 0
+        || set_attr_new(fe, A_speed_est, float_or_none(s->has_speed_est, s->speed_est)) < 0
+        || set_attr_new(fe, A_ref_disagreements, PyLong_FromLong(s->ref_disagreements)) < 0
+        || set_attr_new(fe, A_gain_tt, PyFloat_FromDouble(s->gain_tt)) < 0
+        || set_attr_new(fe, A_gain_tn, PyFloat_FromDouble(s->gain_tn)) < 0
+        || set_attr_new(fe, A_recent_tt, PyFloat_FromDouble(s->recent_tt)) < 0
+        || set_attr_new(fe, A_recent_far, PyFloat_FromDouble(s->recent_far)) < 0
+        || set_attr_new(fe, A_gain_factor, PyFloat_FromDouble(s->gain_factor)) < 0
+        || set_attr_new(fe, A_model_holds, PyBool_FromLong(s->model_holds)) < 0)
+        goto out;
+    rc = 0;
+out:
+    Py_XDECREF(dead);
+    Py_XDECREF(since);
+    Py_XDECREF(unbraked);
+    return rc;
+}
+
+/* FrontEnd._dead_wheels */
+static void dead_wheels(FEState *s, const double *k, double time_s, const double *wl, const int *braked, int *out)
+{
+    for (int i = 0; i < NW; i++) {
+        double others = 0.0;
+        int first = 1;
+        for (int j = 0; j < NW; j++) {
+            if (j == i)
+                continue;
+            others = first ? wl[j] : py_max(others, wl[j]);
+            first = 0;
+        }
+        const double w = wl[i];
+        out[i] = 0;
+        if (s->dead[i]) {
+            if (w > 0.5 * others && w > 0.3) {
+                s->dead[i] = 0;
+                s->has_low_since[i] = 0;
+                s->low_unbraked[i] = 0.0;
+            }
+            out[i] = s->dead[i];
+            continue;
+        }
+        const int low = others >= k[K_MIN_SPEED] && w < k[K_DEAD_RATIO] * others;
+        if (!low) {
+            s->has_low_since[i] = 0;
+            s->low_unbraked[i] = 0.0;
+            continue;
+        }
+        double since = s->low_since[i];
+        if (!s->has_low_since[i] || time_s < since) {
+            s->has_low_since[i] = 1;
+            s->low_since[i] = since = time_s;
+            s->low_unbraked[i] = 0.0;
+        } else if (!braked[i] && s->has_last_sample) {
+            s->low_unbraked[i] += py_max(0.0, py_min(time_s - s->last_sample, k[K_MAX_GAP]));
+        }
+        if (time_s - since > k[K_DEAD_S] || s->low_unbraked[i] > k[K_DEAD_UNBRAKED_S])
+            s->dead[i] = out[i] = 1;
+    }
+}
+
+/* FrontEnd._ref_plausible */
+static int ref_plausible(FEState *s, const double *k, double ref, double fastest)
+{
+    if (ref + 1.0 < fastest * 0.95)
+        return 0;
+    if (ref > fastest / (1.0 - k[K_MAX_ALL_WHEEL_SLIP]) + 1.0 && fastest >= 0.5)
+        return 0;
+    if (s->has_speed_est && fabs(ref - s->speed_est) > 1.0 + 0.1 * s->speed_est) {
+        s->ref_disagreements += 1;
+        return s->ref_disagreements > 10;
+    }
+    s->ref_disagreements = 0;
+    return 1;
+}
+
+/* FrontEnd._update_speed; `ref_fresh` is `_ref_fresh(time_s)` (the reference is None when absent). */
+static double update_speed(FEState *s, const double *k, double time_s, const double *wl, double accel_long,
+                           int wheels_loaded, int has_ref, double ref, int ref_fresh, int *from_ref)
+{
+    const double dt = s->has_speed_time ? time_s - s->speed_time : 0.0;
+    s->has_speed_time = 1;
+    s->speed_time = time_s;
+    double fastest = wl[0];
+    for (int i = 1; i < NW; i++)
+        fastest = py_max(fastest, wl[i]);
+    *from_ref = 0;
+    if (has_ref && ref_fresh && 0.0 <= ref && ref <= MAX_SPEED && ref_plausible(s, k, ref, fastest)) {
+        s->has_speed_est = 1;
+        s->speed_est = ref;
+        *from_ref = 1;
+        return ref;
+    }
+    const double mean = (((wl[0] + wl[1]) + wl[2]) + wl[3]) / 4.0;
+    double v = s->speed_est;
+    if (!s->has_speed_est || dt <= 0.0 || dt > k[K_MAX_GAP]) {
+        v = fastest;
+    } else {
+        v = v + accel_long * dt;
+        if (!wheels_loaded) {
+            v += k[K_GAIN_FREE] * (mean - v);
+        } else if (fastest > v) {
+            v += py_min(k[K_GAIN_UP] * (fastest - v), MAX_ABS_ACCEL * 0.5 * dt + 0.02);
+        } else {
+            const double ceiling = fastest / (1.0 - k[K_MIN_BRAKED_SLIP]);
+            if (v > ceiling)
+                v += k[K_GAIN_DOWN] * (ceiling - v);
+        }
+    }
+    v = py_min(py_max(v, 0.0), MAX_SPEED);
+    s->has_speed_est = 1;
+    s->speed_est = v;
+    return v;
+}
+
+/* FrontEnd._update_brake_gain */
+static void update_brake_gain(FEState *s, const double *k, double accel_long, double speed, const double *inertia,
+                              const double *brake, const double *drive)
+{
+    const double decel = -accel_long;
+    const double total_brake = ((brake[0] + brake[1]) + brake[2]) + brake[3];
+    if (decel < k[K_GAIN_MIN_DECEL] || total_brake < 1.0)
+        return;
+    const double drag = k[K_ROLLING] * speed + k[K_DRAG] * speed * speed;
+    const double total_force = k[K_MASS] * decel - drag;
+    const double other = (((inertia[0] + inertia[1]) + inertia[2]) + inertia[3])
+                         - (((drive[0] + drive[1]) + drive[2]) + drive[3]);
+    const double lim = k[K_GAIN_LIMITS];
+    double ratio = (total_force * k[K_RADIUS] - other) / total_brake;
+    if (!isfinite(ratio))
+        return;
+    const int far = !((1.0 - lim) / BRAKE_MODEL_MARGIN <= ratio && ratio <= (1.0 + lim) * BRAKE_MODEL_MARGIN);
+    ratio = py_min(py_max(ratio, 1.0 - lim), 1.0 + lim);
+    const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_GAIN_TAU], 1e-3));
+    const double weight = total_brake * total_brake;
+    s->gain_tt = keep * s->gain_tt + weight;
+    s->gain_tn = keep * s->gain_tn + weight * ratio;
+    const double recent = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / BRAKE_MODEL_WINDOW);
+    s->recent_tt = recent * s->recent_tt + weight;
+    s->recent_far = recent * s->recent_far + (far ? weight : 0.0);
+    s->gain_factor = s->gain_tn / s->gain_tt;
+    s->model_holds = s->recent_far <= 0.5 * s->recent_tt;
+}
+
+/* An optional float of the inputs tuple: 1 and its value, 0 for None, -1 with an exception. */
+static int input_at(PyObject *inputs, Py_ssize_t i, double *out)
+{
+    PyObject *v = PyTuple_GET_ITEM(inputs, i);
+    if (v == Py_None)
+        return 0;
+    *out = PyFloat_AsDouble(v);
+    return (*out == -1.0 && PyErr_Occurred()) ? -1 : 1;
+}
+
+static PyObject *make_result(PyObject *result_type, PyObject *sample, PyObject *stale, PyObject *fault,
+                             PyObject *dead)
+{
+    PyObject *args[4] = {sample, stale, fault, dead};
+    return PyObject_Vectorcall(result_type, args, dead ? 4 : 3, NULL);
+}
+
+/* sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,
+ *                wheel_times, torque_weights, ref, ref_fresh) -> FrontEndResult
+ * types: (PhysicalSample, FrontEndResult, the six fault messages). */
+static PyObject *py_sample_physics(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *fe, *o_k, *types, *o_omega, *o_omega_dot, *inputs, *stale, *lookups, *o_times, *o_weights, *o_ref;
+    double t_c, ref = 0.0;
+    int glitch, ref_fresh;
+    if (!PyArg_ParseTuple(args, "OO!O!dOOpO!OO!OOOp:sample_physics", &fe, &PyTuple_Type, &o_k, &PyTuple_Type, &types,
+                          &t_c, &o_omega, &o_omega_dot, &glitch, &PyTuple_Type, &inputs, &stale, &PyTuple_Type,
+                          &lookups, &o_times, &o_weights, &o_ref, &ref_fresh))
+        return NULL;
+    if (PyTuple_GET_SIZE(o_k) != K_COUNT || PyTuple_GET_SIZE(types) != 8) {
+        PyErr_SetString(PyExc_ValueError, "sample_physics: wrong number of constants or types");
+        return NULL;
+    }
+    double k[K_COUNT];
+    for (int i = 0; i < K_COUNT; i++)
+        if ((k[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(o_k, i))) == -1.0 && PyErr_Occurred())
+            return NULL;
+    PyObject *sample_type = PyTuple_GET_ITEM(types, 0), *result_type = PyTuple_GET_ITEM(types, 1);
+    PyObject *f_accel = PyTuple_GET_ITEM(types, 2), *f_pressure = PyTuple_GET_ITEM(types, 3);
+    PyObject *f_implausible = PyTuple_GET_ITEM(types, 4), *f_glitch = PyTuple_GET_ITEM(types, 5);
+    PyObject *f_stuck = PyTuple_GET_ITEM(types, 6), *f_disagrees = PyTuple_GET_ITEM(types, 7);
+    const int has_ref = o_ref != Py_None;
+    if (has_ref && (ref = PyFloat_AsDouble(o_ref)) == -1.0 && PyErr_Occurred())
+        return NULL;
+    double omega[MAX_POINTS], omega_dot[MAX_POINTS];
+    if (floats(o_omega, omega, "omega") != NW || floats(o_omega_dot, omega_dot, "omega_dot") != NW) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "sample_physics: four wheels");
+        return NULL;
+    }
+    const int has_drive = k[K_HAS_DRIVE] != 0.0, has_yaw = k[K_HAS_YAW] != 0.0;
+    const Py_ssize_t n_inputs = 6 + (has_drive ? NW : 0) + (has_yaw ? 1 : 0);
+    if (PyTuple_GET_SIZE(inputs) != n_inputs) {
+        PyErr_SetString(PyExc_ValueError, "sample_physics: inputs do not match the constants");
+        return NULL;
+    }
+    /* The sample's inputs: accelerations and pressures required, drive torques and yaw rate optional. */
+    double a_raw = 0.0, a_lat = 0.0, p[NW];
+    int have = 1, got;
+    if ((got = input_at(inputs, 0, &a_raw)) < 0)
+        return NULL;
+    have &= got;
+    if ((got = input_at(inputs, 1, &a_lat)) < 0)
+        return NULL;
+    have &= got;
+    for (int i = 0; i < NW; i++) {
+        if ((got = input_at(inputs, 2 + i, &p[i])) < 0)
+            return NULL;
+        have &= got;
+    }
+    if (!have)
+        return make_result(result_type, Py_None, stale, Py_None, NULL);
+    if (fabs(a_raw) > MAX_ABS_ACCEL || fabs(a_lat) > MAX_ABS_ACCEL)
+        return make_result(result_type, Py_None, stale, f_accel, NULL);
+    for (int i = 0; i < NW; i++)
+        if (!(-1.0 <= p[i] && p[i] <= MAX_PRESSURE))
+            return make_result(result_type, Py_None, stale, f_pressure, NULL);
+    double drive[NW] = {0.0, 0.0, 0.0, 0.0};
+    if (has_drive)
+        for (int i = 0; i < NW; i++) {
+            double v;
+            if ((got = input_at(inputs, 6 + i, &v)) < 0)
+                return NULL;
+            drive[i] = got && isfinite(v) ? v : 0.0;
+        }
+
+    FEState s;
+    if (load_state(fe, &s) < 0)
+        return NULL;
+    const double radius = k[K_RADIUS];
+    double wl[NW];
+    int stuck[NW], braked[NW], dead[NW], failed[NW];
+    int any_failed = 0, all_failed = 1, braking = 0, driving = 0, any_stuck = 0;
+    for (int i = 0; i < NW; i++) {
+        wl[i] = radius * omega[i];
+        stuck[i] = fabs(a_raw) > 0.5 ? (double)s.repeats[i] >= k[K_STUCK_FRAMES] : 0;
+        braked[i] = p[i] - k[K_PUSHOUT] > k[K_MIN_BRAKE_PRESSURE];
+        braking |= braked[i];
+        driving |= has_drive && fabs(drive[i]) > 20.0;
+        any_stuck |= stuck[i];
+    }
+    dead_wheels(&s, k, t_c, wl, braked, dead);
+    for (int i = 0; i < NW; i++) {
+        failed[i] = stuck[i] || dead[i];
+        any_failed |= failed[i];
+        all_failed &= failed[i];
+    }
+    if (any_failed && !all_failed) {
+        /* The slowest working wheel stands in for a stuck or dead one. */
+        double slowest_ok = 0.0;
+        int first = 1;
+        for (int i = 0; i < NW; i++)
+            if (!failed[i]) {
+                slowest_ok = first ? wl[i] : py_min(slowest_ok, wl[i]);
+                first = 0;
+            }
+        for (int i = 0; i < NW; i++)
+            if (failed[i])
+                wl[i] = slowest_ok;
+    }
+    const double accel_long = a_raw - s.bias;
+    if (!braking && !driving && accel_long < -k[K_UNEXPLAINED_DECEL])
+        s.unexplained += (s.has_last_sample && s.last_sample != 0.0) ? py_max(0.0, t_c - s.last_sample) : 0.0;
+    else
+        s.unexplained = 0.0;
+    s.has_last_sample = 1;
+    s.last_sample = t_c;
+    if (s.unexplained > 0.1) {
+        if (store_state(fe, &s) < 0)
+            return NULL;
+        return make_result(result_type, Py_None, stale, f_implausible, NULL);
+    }
+    double fastest = wl[0], slowest = wl[0];
+    for (int i = 1; i < NW; i++) {
+        fastest = py_max(fastest, wl[i]);
+        slowest = py_min(slowest, wl[i]);
+    }
+    int free_rolling = !braking && !driving && fastest - slowest <= FREE_ROLLING_SPREAD * fastest + 0.3;
+    for (int i = 0; free_rolling && i < NW; i++)
+        free_rolling = fabs(radius * omega_dot[i] - accel_long) < FREE_ROLLING_ACCEL;
+    int from_ref;
+    const double speed = update_speed(&s, k, t_c, wl, accel_long, !free_rolling, has_ref, ref, ref_fresh, &from_ref);
+    if (free_rolling) {
+        /* FrontEnd._learn_accel_bias */
+        const double wheel_accel = radius * ((((omega_dot[0] + omega_dot[1]) + omega_dot[2]) + omega_dot[3]) / NW);
+        double alpha = py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_BIAS_TAU], 1e-3));
+        const double error = a_raw - wheel_accel;
+        if (fabs(error) < 2.0) {
+            s.bias_samples += 1;
+            alpha = py_max(alpha, 1.0 / (double)s.bias_samples);
+            s.bias += alpha * (error - s.bias);
+        }
+    }
+    double yaw_rate = 0.0;
+    int have_yaw = 0;
+    if (has_yaw && (have_yaw = input_at(inputs, n_inputs - 1, &yaw_rate)) < 0)
+        return NULL;
+    if (!have_yaw || !isfinite(yaw_rate))
+        yaw_rate = speed > k[K_MIN_SPEED] ? a_lat / speed : 0.0;
+
+    /* VehicleParams.normal_forces */
+    const double h = k[K_CG_HEIGHT], wheelbase = k[K_CG_FRONT] + k[K_CG_REAR];
+    const double front_axle = k[K_MASS] * (GRAVITY * k[K_CG_REAR] - h * accel_long) / wheelbase;
+    const double rear_axle = k[K_MASS] * (GRAVITY * k[K_CG_FRONT] + h * accel_long) / wheelbase;
+    const double lat_f = h * a_lat / (k[K_TRACK_FRONT] * GRAVITY), lat_r = h * a_lat / (k[K_TRACK_REAR] * GRAVITY);
+    const double loads[NW] = {front_axle * (0.5 - lat_f), front_axle * (0.5 + lat_f), rear_axle * (0.5 - lat_r),
+                              rear_axle * (0.5 + lat_r)};
+
+    /* FrontEnd._matched_inputs */
+    double torques[NW], accel_matched = a_raw;
+    PyObject *matched = NULL;
+    if (o_weights != Py_None) {
+        PyObject *margs = PyTuple_Pack(3, lookups, o_times, o_weights);
+        matched = margs ? py_matched_many(NULL, margs) : NULL;
+        Py_XDECREF(margs);
+        if (!matched)
+            return NULL;
+        if (PyTuple_GET_SIZE(matched) != NW + 1) {
+            Py_DECREF(matched);
+            PyErr_SetString(PyExc_ValueError, "sample_physics: four pressures and an acceleration to match");
+            return NULL;
+        }
+    }
+    for (int i = 0; i <= NW; i++) {
+        double m = 0.0;
+        int have_m = 0;
+        if (matched && (have_m = input_at(matched, i, &m)) < 0) {
+            Py_DECREF(matched);
+            return NULL;
+        }
+        if (i < NW)
+            torques[i] = k[K_BRAKE_GAIN_FL + i] * (have_m ? m : py_max(0.0, p[i] - k[K_PUSHOUT]));
+        else if (have_m)
+            accel_matched = m;
+    }
+    Py_XDECREF(matched);
+    double inertia[NW];
+    for (int i = 0; i < NW; i++)
+        inertia[i] = k[K_INERTIA] * omega_dot[i];
+    if (k[K_GAIN_CORRECTION] != 0.0 && !glitch)
+        update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive);
+    const double gain = s.gain_factor;
+
+    double slips[NW], forces[NW], mus[NW];
+    PyObject *usable = PyTuple_New(NW), *sample = NULL, *dead_list = NULL, *result = NULL;
+    if (!usable)
+        return NULL;
+    for (int i = 0; i < NW; i++) {
+        const double side = (i % 2) ? 1.0 : -1.0, half_track = (i < 2 ? k[K_TRACK_FRONT] : k[K_TRACK_REAR]) / 2;
+        const double ground = speed + side * yaw_rate * half_track;
+        const double denom = py_max(ground, wl[i]);
+        const double slip = denom > 0.1 ? (ground - wl[i]) / denom : 0.0;
+        const double force = (inertia[i] + gain * torques[i] - drive[i]) / radius;
+        const double load = loads[i];
+        const double mu = load > 50.0 ? force / load : 0.0;
+        const int ok = speed >= k[K_MIN_SPEED] && fabs(slip) <= k[K_MAX_SLIP]
+                       && (braked[i] || (has_drive && fabs(drive[i]) > 20.0)) && load > 50.0 && !glitch && !stuck[i]
+                       && !dead[i] && isfinite(mu) && s.model_holds;
+        slips[i] = slip;
+        forces[i] = force;
+        mus[i] = mu;
+        PyTuple_SET_ITEM(usable, i, PyBool_FromLong(ok));
+    }
+    if (store_state(fe, &s) < 0)
+        goto out;
+    PyObject *t_slip = tuple_of(slips, NW), *t_mu = tuple_of(mus, NW), *t_load = tuple_of(loads, NW);
+    PyObject *t_force = tuple_of(forces, NW), *o_tc = PyFloat_FromDouble(t_c), *o_speed = PyFloat_FromDouble(speed);
+    if (t_slip && t_mu && t_load && t_force && o_tc && o_speed) {
+        PyObject *fields[9] = {o_tc, o_speed, t_slip, t_mu, t_load, t_force, usable, braking ? Py_True : Py_False,
+                               from_ref ? Py_True : Py_False};
+        sample = PyObject_Vectorcall(sample_type, fields, 9, NULL);
+    }
+    Py_XDECREF(t_slip);
+    Py_XDECREF(t_mu);
+    Py_XDECREF(t_load);
+    Py_XDECREF(t_force);
+    Py_XDECREF(o_tc);
+    Py_XDECREF(o_speed);
+    if (!sample)
+        goto out;
+    int n_dead = 0;
+    for (int i = 0; i < NW; i++)
+        n_dead += dead[i];
+    if (!(dead_list = PyTuple_New(n_dead)))
+        goto out;
+    for (int i = 0, j = 0; i < NW; i++)
+        if (dead[i])
+            PyTuple_SET_ITEM(dead_list, j++, PyLong_FromLong(i));
+    PyObject *fault = glitch ? f_glitch : any_stuck ? f_stuck : (s.model_holds || !braking) ? Py_None : f_disagrees;
+    result = make_result(result_type, sample, stale, fault, dead_list);
+out:
+    Py_XDECREF(usable);
+    Py_XDECREF(sample);
+    Py_XDECREF(dead_list);
+    return result;
+}
+
+static int intern_attributes(void)
+{
+    struct { PyObject **slot; const char *name; } names[] = {
+        {&A_repeats, "_repeats"}, {&A_dead, "_dead"}, {&A_low_since, "_low_since_s"},
+        {&A_low_unbraked, "_low_unbraked_s"}, {&A_last_sample, "_last_sample_time_s"}, {&A_bias, "_accel_bias_mps2"},
+        {&A_bias_samples, "_accel_bias_samples"}, {&A_unexplained, "_unexplained_s"},
+        {&A_speed_time, "_speed_time_s"}, {&A_speed_est, "_speed_estimate_mps"},
+        {&A_ref_disagreements, "_ref_disagreements"}, {&A_gain_tt, "_gain_sum_tt"}, {&A_gain_tn, "_gain_sum_tn"},
+        {&A_recent_tt, "_recent_sum_tt"}, {&A_recent_far, "_recent_sum_far"}, {&A_gain_factor, "_brake_gain_factor"},
+        {&A_model_holds, "_brake_model_holds"},
+    };
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if (!(*names[i].slot = PyUnicode_InternFromString(names[i].name)))
+            return -1;
+    return 0;
+}
+
 static PyMethodDef methods[] = {
     {"fit_wheels", py_fit_wheels, METH_VARARGS,
      "fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights) | None\n\n"
@@ -429,6 +1028,10 @@ static PyMethodDef methods[] = {
     {"values_at", py_values_at, METH_VARARGS,
      "values_at(lookups, t) -> tuple: for each (series dict, name) of lookups (or None), what\n"
      "_MessageHistory.value_at(t, name) gives: None when the signal has no series yet."},
+    {"sample_physics", py_sample_physics, METH_VARARGS,
+     "sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,\n"
+     "wheel_times, torque_weights, ref, ref_fresh) -> FrontEndResult: FrontEnd._compute_sample after the\n"
+     "fit and the inputs, reading and updating the FrontEnd's state attributes."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -447,7 +1050,7 @@ PyMODINIT_FUNC PyInit__frontcore(void)
         return NULL;
     deque_append = PyObject_GetAttrString(deque, "append");
     Py_DECREF(deque);
-    if (!deque_append)
+    if (!deque_append || intern_attributes() < 0)
         return NULL;
     return PyModule_Create(&module);
 }

@@ -239,6 +239,19 @@ class FrontEnd:
             (self._source[n].series, n, floor) if n in self._source else None
             for n, floor in [(name, pushout) for name in PRESSURE_NAMES] + [("accel_long", None)])
         self._brake_gains = [vehicle.brake_gain(i) for i in range(4)]
+        # `_compute_sample`'s compiled part reads its settings as one tuple of numbers, in the
+        # order of `_frontcore.c`'s K_ constants.
+        self._physics_constants = tuple(float(x) for x in (
+            options.stuck_frames, pushout, options.min_brake_pressure, options.min_speed,
+            options.dead_wheel_ratio, options.dead_wheel_s, options.dead_wheel_unbraked_s, options.max_gap,
+            options.unexplained_decel, vehicle.wheel_radius, options.speed_gain_free_rolling,
+            options.speed_gain_up, options.speed_gain_down, options.min_braked_slip, options.max_all_wheel_slip,
+            self.sample_period_s, options.accel_bias_time_constant, vehicle.mass, vehicle.cg_height,
+            vehicle.cg_to_front_axle, vehicle.cg_to_rear_axle, vehicle.track_front, vehicle.track_rear,
+            vehicle.wheel_inertia, options.brake_gain_correction, options.brake_gain_min_decel,
+            vehicle.rolling_resistance, vehicle.drag_area_coefficient, options.brake_gain_limits,
+            options.brake_gain_time_constant, options.max_slip, self._has_drive_torque, self._has_yaw_rate,
+            *self._brake_gains))
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -505,6 +518,15 @@ class FrontEnd:
         t_c, omega, omega_dot, glitch = self._fit_wheels()
 
         inputs = self._values_at(t_c)
+        if self.core is not None:
+            # The rest in one compiled call on this object's state (the code below, line by line).
+            ref, ref_fresh = None, False
+            if self._has_ref_speed:
+                ref = self._value("vehicle_speed_ref", t_c)
+                ref_fresh = ref is not None and self._ref_fresh(t_c)
+            return self.core.sample_physics(self, self._physics_constants, _PHYSICS_TYPES, t_c, omega, omega_dot,
+                                            glitch, inputs, stale, self._matched_lookups, self._wheel_times,
+                                            self._torque_weights, ref, ref_fresh)
         accel_long_raw, accel_lat = inputs[0], inputs[1]
         pressures = list(inputs[2:6])
         if accel_long_raw is None or accel_lat is None or None in pressures:
@@ -770,6 +792,13 @@ class FrontEnd:
         self._recent_sum_far = recent * self._recent_sum_far + (weight if far else 0.0)
         self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
         self._brake_model_holds = self._recent_sum_far <= 0.5 * self._recent_sum_tt
+
+
+# What `_frontcore.sample_physics` builds its results from: the two result types, then the
+# fault messages it can give (those of `_compute_sample`, in this order).
+_PHYSICS_TYPES = (PhysicalSample, FrontEndResult, "acceleration out of range", "brake pressure out of range",
+                  "brake pressure implausible", "wheel speed glitch", "wheel speed stuck",
+                  "brake pressure disagrees with deceleration")
 
 
 def _interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -156,3 +157,108 @@ def test_history_push_is_the_same_on_both_paths():
         assert {n: (list(ts), list(vs)) for n, (ts, vs) in compiled.series.items()} == \
                {n: (list(ts), list(vs)) for n, (ts, vs) in floats.series.items()}
     assert all(ts.maxlen == 16 for ts, _ in compiled.series.values())
+
+
+# The state `_frontcore.sample_physics` carries between samples (on the FrontEnd's attributes).
+PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_sample_time_s", "_accel_bias_mps2",
+                 "_accel_bias_samples", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
+                 "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_recent_sum_tt", "_recent_sum_far",
+                 "_brake_gain_factor", "_brake_model_holds")
+
+
+def _physics_stream(seed: int, steps: int):
+    """Randomised inputs that visit every branch of `_compute_sample`: braking and free rolling,
+    drive torque, a curve, a dead and a stuck wheel, a reference speed that glitches or goes
+    silent, pressures that vanish under deceleration or leave their range, NaN inputs, gaps."""
+    from frictiond.frontend import DRIVE_TORQUE_NAMES, PRESSURE_NAMES, WHEEL_SPEED_NAMES
+
+    rng = np.random.default_rng(seed)
+    t, v = 0.0, 25.0
+    for k in range(steps):
+        phase = (k // 60) % 6          # 0.6 s of each regime in turn
+        t += 0.01 if rng.random() > 0.01 else 0.4   # now and then a gap beyond max_gap
+        decel = {0: 0.0, 1: 6.0, 2: 2.0, 3: -1.5, 4: 8.0, 5: 0.5}[phase]
+        v = max(v - decel * 0.01, 0.0) if v > 4 else 25.0
+        slips = rng.uniform(0.0, 0.25, 4) if phase in (1, 4) else rng.uniform(-0.01, 0.02, 4)
+        omega = [max(v * (1 - s), 0.0) / 0.31 + float(rng.normal(0, 0.05)) for s in slips]
+        if phase == 2 and k % 60 > 20:
+            omega[1] = 0.0                                        # a dead sensor
+        if phase == 5 and k % 60 > 10:
+            omega[3] = 55.0                                       # a stuck one
+        pressures = [float(rng.uniform(20, 90)) if phase in (1, 4) else float(rng.uniform(0, 0.5))] * 4
+        if phase == 4 and k % 60 > 40:
+            pressures = [0.0] * 4                                 # gone while the car decelerates
+        if rng.random() < 0.01:
+            pressures[int(rng.integers(4))] = float(rng.choice([400.0, -5.0, math.nan]))
+        accel = {"accel_long": -decel + float(rng.normal(0, 0.1)), "accel_lat": float(rng.normal(0, 2.0)),
+                 "yaw_rate": float(rng.normal(0, 0.1)) if rng.random() > 0.05 else math.nan}
+        if rng.random() < 0.005:
+            accel["accel_long"] = 40.0
+        drive = {n: (300.0 if phase == 3 else 0.0) + float(rng.normal(0, 5)) for n in DRIVE_TORQUE_NAMES}
+        yield t + 0.001, "ACCEL", accel
+        yield t + 0.002, "PRESS", dict(zip(PRESSURE_NAMES, pressures))
+        yield t + 0.003, "DRIVE", drive
+        if phase != 0 or k % 60 < 30:                           # the reference falls silent at times
+            ref = v + (float(rng.choice([0.0, 0.0, 0.0, 8.0])))    # ... and glitches
+            yield t + 0.004, "REF", {"vehicle_speed_ref": ref}
+        yield t + 0.009, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, omega))
+
+
+@needs_core
+@pytest.mark.parametrize("seed", [11, 12])
+def test_sample_physics_is_compute_sample_on_every_branch(seed):
+    from frictiond.frontend import DRIVE_TORQUE_NAMES, PRESSURE_NAMES, WHEEL_SPEED_NAMES, FrontEnd, FrontEndOptions
+    from frictiond.vehicle import VehicleParams
+
+    messages = {"WHEELS": WHEEL_SPEED_NAMES, "ACCEL": ("accel_long", "accel_lat", "yaw_rate"),
+                "PRESS": PRESSURE_NAMES, "REF": ("vehicle_speed_ref",), "DRIVE": DRIVE_TORQUE_NAMES}
+    vehicle = VehicleParams(brake_pushout_pressure=0.3, rolling_resistance=5.0)
+
+    def make() -> FrontEnd:
+        return FrontEnd(vehicle, FrontEndOptions(), messages, {m: 0.01 for m in messages}, "WHEELS")
+
+    compiled, floats = make(), make()
+    floats.core = None
+    faults, samples, from_ref, dead = set(), 0, 0, 0
+    for t, message, values in _physics_stream(seed, 3000):
+        a, b = compiled.push(t, message, values), floats.push(t, message, values)
+        assert (a is None) == (b is None)
+        if a is None:
+            continue
+        assert (a.fault, a.dead_wheels, a.stale_messages) == (b.fault, b.dead_wheels, b.stale_messages)
+        assert (a.sample is None) == (b.sample is None)
+        if a.sample is not None:
+            samples += 1
+            from_ref += a.sample.speed_from_reference
+            dead += bool(a.dead_wheels)
+            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n"):
+                np.testing.assert_allclose(getattr(a.sample, field), getattr(b.sample, field), rtol=1e-12, atol=1e-12)
+            assert (a.sample.usable, a.sample.braking, a.sample.speed_from_reference) == \
+                   (b.sample.usable, b.sample.braking, b.sample.speed_from_reference)
+        faults.add(a.fault)
+        for name in PHYSICS_STATE:
+            x, y = getattr(compiled, name), getattr(floats, name)
+            assert type(x) is type(y), name
+            np.testing.assert_allclose(np.array(x, dtype=float), np.array(y, dtype=float), rtol=1e-12, atol=1e-12,
+                                       err_msg=name)
+    # Every way out of the compiled code was taken.
+    assert {"acceleration out of range", "brake pressure out of range", "brake pressure implausible",
+            "wheel speed stuck", "wheel speed glitch", None} <= faults, faults
+    assert samples > 1000 and 0 < from_ref < samples and dead > 5
+
+
+@needs_core
+def test_sample_physics_refuses_what_it_cannot_read():
+    fe = Pipeline(load_config(default_config_path())).front_end
+    args = [fe, fe._physics_constants, frontend_module._PHYSICS_TYPES, 1.0, [80.0] * 4, [0.0] * 4, False,
+            (0.0,) * len(fe._sample_inputs), (), fe._matched_lookups, [1.0], None, None, False]
+    assert core.sample_physics(*args).sample is not None
+    with pytest.raises(ValueError, match="constants"):
+        core.sample_physics(*args[:1], args[1][:-1], *args[2:])
+    with pytest.raises(ValueError, match="inputs"):
+        core.sample_physics(*args[:7], (0.0,) * 3, *args[8:])
+    with pytest.raises(ValueError, match="four"):
+        core.sample_physics(*args[:4], [80.0] * 3, *args[5:])
+    fe._dead = [False] * 3
+    with pytest.raises(TypeError, match="_dead"):
+        core.sample_physics(*args)

@@ -957,6 +957,54 @@ static PyObject *py_peak_report(PyObject *self, PyObject *args)
 
 /* ------------------------------------------------- weights, residual bias, covariance */
 
+/* Forgetting weights exp(min(t − now, 0)/τ) and the rows' weights √w/σ of m samples; returns Σ w. */
+static double weights_into(const double *t, Py_ssize_t m, double now, double tau, double sigma, double *w, double *sw)
+{
+    const double inv_sigma = 1.0 / sigma;
+    double total = 0.0;
+    for (Py_ssize_t j = 0; j < m; j++) {
+        w[j] = exp(fmin(t[j] - now, 0.0) / tau);
+        sw[j] = sqrt(w[j]) * inv_sigma;
+        total += w[j];
+    }
+    return total;
+}
+
+/* The residuals r[first:m] back in μ units (r·σ/√w): their mean, rms deviation and |Σ sign| / n. */
+static void residual_stats(const double *r, const double *w, Py_ssize_t first, Py_ssize_t m, double sigma,
+                           double *mean, double *rms, double *same_sign)
+{
+    const Py_ssize_t n = m - first;
+    double sum = 0.0, signs = 0.0;
+    for (Py_ssize_t j = first; j < m; j++) {
+        const double e = r[j] * sigma / sqrt(w[j]);
+        sum += e;
+        signs += (e > 0) - (e < 0);
+    }
+    *mean = sum / n;
+    double dev2 = 0.0;
+    for (Py_ssize_t j = first; j < m; j++) {
+        const double d = r[j] * sigma / sqrt(w[j]) - *mean;
+        dev2 += d * d;
+    }
+    *rms = sqrt(dev2 / n);
+    *same_sign = fabs(signs / n);
+}
+
+/* numpy's a[lo:hi].searchsorted(t, side="left") + lo: the first k with a[k] >= t (NaN sorts last). */
+static Py_ssize_t search_left(const double *a, Py_ssize_t lo, Py_ssize_t hi, double t)
+{
+    while (lo < hi) {
+        const Py_ssize_t mid = lo + (hi - lo) / 2;
+        const double x = a[mid];
+        if (x < t || (t != t && x == x))   /* numpy's float "less than": NaN is the largest */
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
 /* Forgetting weights exp(min(t − now, 0)/τ) and the rows' weights √w/σ, into w_out, sw_out;
  * returns Σ w. */
 static PyObject *py_weights(PyObject *self, PyObject *args)
@@ -978,16 +1026,7 @@ static PyObject *py_weights(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "tau and sigma must be > 0");
         goto out;
     }
-    const double *t = b[0].view.buf;
-    double *w = b[1].view.buf, *sw = b[2].view.buf;
-    const double inv_sigma = 1.0 / sigma;
-    double total = 0.0;
-    for (Py_ssize_t j = 0; j < m; j++) {
-        w[j] = exp(fmin(t[j] - now, 0.0) / tau);
-        sw[j] = sqrt(w[j]) * inv_sigma;
-        total += w[j];
-    }
-    result = PyFloat_FromDouble(total);
+    result = PyFloat_FromDouble(weights_into(b[0].view.buf, m, now, tau, sigma, b[1].view.buf, b[2].view.buf));
 out:
     release_all(b, 3);
     return result;
@@ -1015,21 +1054,9 @@ static PyObject *py_residual_bias(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "first: outside the residuals");
         goto out;
     }
-    const double *r = b[0].view.buf, *w = b[1].view.buf;
-    const Py_ssize_t n = m - first;
-    double sum = 0.0, signs = 0.0;
-    for (Py_ssize_t j = first; j < m; j++) {
-        const double e = r[j] * sigma / sqrt(w[j]);
-        sum += e;
-        signs += (e > 0) - (e < 0);
-    }
-    const double mean = sum / n;
-    double dev2 = 0.0;
-    for (Py_ssize_t j = first; j < m; j++) {
-        const double d = r[j] * sigma / sqrt(w[j]) - mean;
-        dev2 += d * d;
-    }
-    result = Py_BuildValue("(ddd)", mean, sqrt(dev2 / n), fabs(signs / n));
+    double mean, rms, same_sign;
+    residual_stats(b[0].view.buf, b[1].view.buf, first, m, sigma, &mean, &rms, &same_sign);
+    result = Py_BuildValue("(ddd)", mean, rms, same_sign);
 out:
     release_all(b, 2);
     return result;
@@ -1155,6 +1182,123 @@ static PyObject *py_append_samples(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* fit_window(arrays, lo, hi, now, tau, sigma, jump_t, x, lb, ub, prior, inv_prior_std, tie, gradient,
+ *            normal, constants, radius, max_iterations, ftol, xtol, gtol, predicted_ftol, max_rejections,
+ *            rows_x, cached_n) -> (w_sum, radius, r·r, first, mean, rms, same_sign)
+ *
+ * One update's fit on the window's own columns [lo, hi), without slicing them in Python:
+ * `weights` (into scratch rows 2 and 3), `solve` (residuals into scratch rows 0 and 1, the row
+ * cache in core_rows[lo:hi], valid for its first cached_n samples at rows_x), then the data
+ * residuals' sum of squares and `residual_bias` of the samples from `search_left(jump_t)` on
+ * (`first` relative to lo; mean, rms and same_sign 0 when there are none).
+ * arrays: (pow_lam_v, stiff, lam_v, mu, wheel, time, scratch (4 x capacity), core_rows (capacity x 5)). */
+static PyObject *py_fit_window(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *arrays, *objs[9], *o_rows_x;
+    Py_ssize_t lo, hi, cached_n;
+    double now, tau, sigma, jump_t, mu_c, dmu, alpha, sc4, sc5, sc6, radius, ftol, xtol, gtol, predicted_ftol;
+    int max_iterations, max_rejections;
+    if (!PyArg_ParseTuple(args, "O!nnddddOOOOOOOO(dddddd)diddddiOn:fit_window", &PyTuple_Type, &arrays, &lo, &hi,
+                          &now, &tau, &sigma, &jump_t, &objs[0], &objs[1], &objs[2], &objs[3], &objs[4], &objs[5],
+                          &objs[6], &objs[7], &mu_c, &dmu, &alpha, &sc4, &sc5, &sc6, &radius, &max_iterations, &ftol,
+                          &xtol, &gtol, &predicted_ftol, &max_rejections, &o_rows_x, &cached_n))
+        return NULL;
+    objs[8] = o_rows_x;
+    if (PyTuple_GET_SIZE(arrays) != 8) {
+        PyErr_SetString(PyExc_ValueError, "fit_window: arrays are the window's 8 columns");
+        return NULL;
+    }
+    static const char *col_names[8] = {"pow_lam_v", "stiff", "lam_v", "mu", "wheel", "time", "scratch", "core_rows"};
+    static const char *par_names[9] = {"x", "lb", "ub", "prior", "inv_prior_std", "tie", "gradient", "normal",
+                                       "rows_x"};
+    static const Py_ssize_t par_counts[9] = {NP, NP, NP, NP, NP, NT * NW, NP, NP * NP, NP};
+    Buf b[17];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    double *rows_trial = NULL;
+    if (get_array(PyTuple_GET_ITEM(arrays, 5), &b[5], "time", -1, 0, 0) < 0)
+        goto out;
+    const Py_ssize_t cap = b[5].view.len / 8;
+    for (int i = 0; i < 8; i++) {
+        if (i == 5)
+            continue;
+        const Py_ssize_t count = i == 6 ? 4 * cap : i == 7 ? ROW * cap : cap;
+        if (get_array(PyTuple_GET_ITEM(arrays, i), &b[i], col_names[i], count, i >= 6, i == 4) < 0)
+            goto out;
+    }
+    for (int i = 0; i < 9; i++)
+        if (get_array(objs[i], &b[8 + i], par_names[i], par_counts[i], i == 0 || i == 6 || i == 7, 0) < 0)
+            goto out;
+    if (lo < 0 || hi <= lo || hi > cap || cached_n < 0 || cached_n > hi - lo) {
+        PyErr_SetString(PyExc_ValueError, "fit_window: lo, hi or cached_n outside the window");
+        goto out;
+    }
+    if (!(tau > 0) || !(sigma > 0) || max_iterations < 0 || max_rejections < 1 || sc4 == 0 || sc5 == 0) {
+        PyErr_SetString(PyExc_ValueError, "fit_window: bad settings");
+        goto out;
+    }
+    const Py_ssize_t m = hi - lo;
+    const Py_ssize_t *wheel = (const Py_ssize_t *)b[4].view.buf + lo;
+    for (Py_ssize_t j = 0; j < m; j++)
+        if (wheel[j] < 0 || wheel[j] >= NW) {
+            PyErr_SetString(PyExc_ValueError, "wheel: index outside 0..3");
+            goto out;
+        }
+    if (!(rows_trial = PyMem_Malloc((size_t)(ROW * m + 1) * sizeof(double)))) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    double *scratch = b[6].view.buf;
+    double *r_data = scratch + lo, *r_work = scratch + cap + lo, *w = scratch + 2 * cap + lo, *sw = scratch + 3 * cap + lo;
+    const double *t = (const double *)b[5].view.buf + lo;
+    const double w_sum = weights_into(t, m, now, tau, sigma, w, sw);
+    Problem p = {m, (const double *)b[0].view.buf + lo, (const double *)b[1].view.buf + lo,
+                 (const double *)b[2].view.buf + lo, (const double *)b[3].view.buf + lo, sw, wheel,
+                 b[11].view.buf, b[12].view.buf, b[13].view.buf, mu_c, dmu, alpha, sc4, sc5, sc6};
+    const Outcome o = solve(&p, b[8].view.buf, b[9].view.buf, b[10].view.buf, radius, max_iterations, ftol, xtol,
+                            gtol, max_rejections, predicted_ftol, b[14].view.buf, b[15].view.buf, r_data, r_work,
+                            (double *)b[7].view.buf + ROW * lo, b[16].view.buf, cached_n, rows_trial);
+    double rr = 0.0;
+    for (Py_ssize_t j = 0; j < m; j++)
+        rr += r_data[j] * r_data[j];
+    const Py_ssize_t first = search_left(t, 0, m, jump_t);
+    double mean = 0.0, rms = 0.0, same_sign = 0.0;
+    if (first < m)
+        residual_stats(r_data, w, first, m, sigma, &mean, &rms, &same_sign);
+    result = Py_BuildValue("(dddnddd)", w_sum, o.radius, rr, first, mean, rms, same_sign);
+out:
+    PyMem_Free(rows_trial);
+    release_all(b, 17);
+    return result;
+}
+
+/* search_left(times, lo, hi, t) -> int: numpy's `times[lo:hi].searchsorted(t, side="left") + lo`
+ * (the first k with times[k] >= t; NaN sorts last), on a float64 array without the slice. */
+static PyObject *py_search_left(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_times;
+    Py_ssize_t lo, hi;
+    double t;
+    if (!PyArg_ParseTuple(args, "Onnd:search_left", &o_times, &lo, &hi, &t))
+        return NULL;
+    Buf b[1];
+    memset(b, 0, sizeof b);
+    if (get_array(o_times, &b[0], "times", -1, 0, 0) < 0) {
+        release_all(b, 1);
+        return NULL;
+    }
+    if (lo < 0 || hi < lo || hi > b[0].view.len / 8) {
+        release_all(b, 1);
+        PyErr_SetString(PyExc_ValueError, "search_left: lo, hi outside the array");
+        return NULL;
+    }
+    const Py_ssize_t k = search_left(b[0].view.buf, lo, hi, t);
+    release_all(b, 1);
+    return PyLong_FromSsize_t(k);
+}
+
 static PyMethodDef methods[] = {
     {"append_samples", py_append_samples, METH_VARARGS,
      "append_samples(columns, k, slips, speed, mus, time_s, wheels, alpha, patch_length, max_slip) -> None\n\n"
@@ -1190,6 +1334,12 @@ static PyMethodDef methods[] = {
      "residual_bias(r_data, weights, first, sigma) -> (mean, rms deviation, |sum of signs| / n) of r*sigma/sqrt(w)"},
     {"inverse_free", py_inverse_free, METH_VARARGS,
      "inverse_free(normal, free, out) -> bool: the inverse of the free parameters' block, zero elsewhere"},
+    {"fit_window", py_fit_window, METH_VARARGS,
+     "fit_window(arrays, lo, hi, now, tau, sigma, jump_t, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
+     "constants, radius, max_iterations, ftol, xtol, gtol, predicted_ftol, max_rejections, rows_x, cached_n)\n"
+     "-> (w_sum, radius, r.r, first, mean, rms, same_sign): weights, solve and residual_bias on the window's columns"},
+    {"search_left", py_search_left, METH_VARARGS,
+     "search_left(times, lo, hi, t) -> int: times[lo:hi].searchsorted(t, side='left') + lo"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -277,11 +277,17 @@ class _Window:
         # parameters `LugreTrustRegionEstimator._core_rows_x`, valid before `core_cached_end`.
         self.core_rows = np.empty((capacity, 5))
         self.core_cached_end = 0
-        self.scratch = np.empty((2, capacity))   # the compiled fit's residual buffers
+        # The compiled fit's buffers: the weighted residuals, a trial's, the forgetting weights
+        # and the rows' weights √w/σ.
+        self.scratch = np.empty((4, capacity))
         self.start = 0
         self.end = 0
         self.cached_end = 0
         self.last_time_by_axle = [-math.inf, -math.inf]   # newest sample of a front / rear wheel
+        # The columns `_fitcore.fit_window` reads and writes (never reallocated: `_compact` moves
+        # samples within them).
+        self.core_columns = (self.pow_lam_v, self.stiff, self.lam_v, self.mu, self.wheel, self.time, self.scratch,
+                             self.core_rows)
 
     def __len__(self) -> int:
         return self.end - self.start
@@ -340,7 +346,10 @@ class _Window:
             self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
         self.end += n
 
-    def drop_before(self, time_s: float) -> None:
+    def drop_before(self, time_s: float, core: Any = None) -> None:
+        if core is not None:
+            self.start = core.search_left(self.time, self.start, self.end, time_s)
+            return
         times = self.time[self.start:self.end]
         self.start += int(times.searchsorted(time_s, side="left"))
 
@@ -519,7 +528,7 @@ class LugreTrustRegionEstimator:
                 self._last_jump_s += step
             self._excited_since_s = math.inf
         self._last_sample_s = t
-        window.drop_before(t - o.window_s)
+        window.drop_before(t - o.window_s, self.core)
         fresh = len(window) == 0
         added = 0
         v = sample.speed_mps
@@ -608,19 +617,24 @@ class LugreTrustRegionEstimator:
         o = self.options
         first = int(times.searchsorted(now_s - o.jump_window_s, side="left"))   # (times ascend)
         n_recent = len(times) - first
-        if n_recent < 8 or self._fits < 5 or len(times) - n_recent < 2 * n_recent:
+        if not self._innovation_counts(len(times), n_recent):
             return 0.0
-        if self.core is not None:
-            mean, rms, same_sign = self.core.residual_bias(r_data, weights, first, o.measurement_std)
-        else:
-            # Back from weighted, normalised residuals to μ units (model − measurement).
-            resid = r_data[first:] * o.measurement_std / np.sqrt(weights[first:])
-            # np.mean / np.std, without their wrappers (same operations, same order).
-            mean = float(resid.sum()) / n_recent
-            dev = resid - mean
-            dev *= dev
-            rms = math.sqrt(float(dev.sum()) / n_recent)
-            same_sign = abs(float(np.sign(resid).sum()) / n_recent)
+        # Back from weighted, normalised residuals to μ units (model − measurement).
+        resid = r_data[first:] * o.measurement_std / np.sqrt(weights[first:])
+        # np.mean / np.std, without their wrappers (same operations, same order).
+        mean = float(resid.sum()) / n_recent
+        dev = resid - mean
+        dev *= dev
+        rms = math.sqrt(float(dev.sum()) / n_recent)
+        same_sign = abs(float(np.sign(resid).sum()) / n_recent)
+        return self._innovation_score_of(n_recent, mean, rms, same_sign)
+
+    def _innovation_counts(self, samples: int, n_recent: int) -> bool:
+        """Whether the newest `n_recent` of `samples` are enough, and few enough, to judge."""
+        return not (n_recent < 8 or self._fits < 5 or samples - n_recent < 2 * n_recent)
+
+    def _innovation_score_of(self, n_recent: int, mean: float, rms: float, same_sign: float) -> float:
+        o = self.options
         noise = max(o.measurement_std, rms)
         score = abs(mean) / (noise / math.sqrt(n_recent))
         return score if same_sign > 0.7 else min(score, o.jump_threshold)
@@ -629,7 +643,7 @@ class LugreTrustRegionEstimator:
         """Drop the window's older samples when the newest ones disagree with the fit (a μ jump)."""
         o = self.options
         if score > o.jump_threshold * 2.0 and now_s - self._last_jump_s > o.jump_refractory_s:
-            self._window.drop_before(now_s - o.jump_window_s - 1e-9)
+            self._window.drop_before(now_s - o.jump_window_s - 1e-9, self.core)
             self._radius = None  # let the parameters move freely again
             self._jumps += 1
             self._last_jump_s = now_s
@@ -774,46 +788,51 @@ class LugreTrustRegionEstimator:
 
     def _fit(self, now_s: float, speed: float) -> FrictionEstimate:
         o = self.options
-        slip, speeds, mu_meas, times, wheel = self._window.view()
         if self.core is not None:
-            weights, sw = np.empty(len(times)), np.empty(len(times))
-            w_sum = self.core.weights(times, now_s, o.forgetting_time_constant, o.measurement_std, weights, sw)
-            normal, r_data = self._solve_compiled(sw)
-        else:
-            weights = self._weights(now_s, times)
-            w_sum = float(weights.sum())
-            sw = np.sqrt(weights) * (1.0 / o.measurement_std)
-            normal, r_data = self._solve_numpy(sw)
+            return self._fit_compiled(now_s, speed)
+        slip, speeds, mu_meas, times, wheel = self._window.view()
+        weights = self._weights(now_s, times)
+        w_sum = float(weights.sum())
+        sw = np.sqrt(weights) * (1.0 / o.measurement_std)
+        normal, r_data = self._solve_numpy(sw)
         self._fits += 1
         self._last_fit_s = now_s
         self._innovation_score = self._innovation(now_s, times, r_data, weights)
-        estimate = self._report(now_s, speed, r_data, normal, weights, w_sum, slip, wheel)
+        estimate = self._report(now_s, speed, float(r_data @ r_data), normal, weights, w_sum, len(slip))
         self._detect_jump(now_s, self._innovation_score)
         return estimate
 
-    def _solve_compiled(self, sw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The update's trust-region iterations in C; JᵀJ and the weighted residuals at the result."""
+    def _fit_compiled(self, now_s: float, speed: float) -> FrictionEstimate:
+        """`_fit` in one compiled call on the window's own columns (`_fitcore.fit_window`: the
+        weights, the trust-region iterations and the newest residuals' bias), without slicing
+        them here: numpy's per-call machinery was most of an update's cost on a cold cache."""
         o = self.options
         w = self._window
         lo, hi = w.start, w.end
         x = self._x.copy()
-        # Scratch for this update only (r_data and normal are read by the report, not kept).
-        gradient, normal = self._gradient_buffer, self._normal_buffer
-        r_data, r_work = w.scratch[0, :hi - lo], w.scratch[1, :hi - lo]
         # The rows of the samples already in the window were computed at this x by the last
         # update (its result): only the new samples' rows are computed for the first evaluation.
         cached = w.core_cached_end - lo if self._core_rows_x is not None and w.core_cached_end > lo else 0
-        _, radius, _, _, _ = self.core.solve(
-            w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, x, self._lb,
-            self._ub, self._prior, self._inv_prior_std, self._tie_rel_d, gradient, normal, r_data, r_work,
+        normal = self._normal_buffer
+        w_sum, radius, residual_ss, first, mean, rms, same_sign = self.core.fit_window(
+            w.core_columns, lo, hi, now_s, o.forgetting_time_constant, o.measurement_std, now_s - o.jump_window_s,
+            x, self._lb, self._ub, self._prior, self._inv_prior_std, self._tie_rel_d, self._gradient_buffer, normal,
             self._core_constants, math.nan if self._radius is None else self._radius, o.max_iterations, o.ftol,
-            o.xtol, 1e-8, o.predicted_ftol, 4, (w.core_rows[lo:hi], self._core_rows_x if cached else x, cached))
+            o.xtol, 1e-8, o.predicted_ftol, 4, self._core_rows_x if cached else x, cached)
         w.core_cached_end = hi
         self._core_rows_x = x
         self._cache_x = None   # (the numpy path's row cache is not kept up here)
         self._x = x
         self._radius = max(radius, 1e-3)
-        return normal, r_data
+        self._fits += 1
+        self._last_fit_s = now_s
+        m = hi - lo
+        n_recent = m - first
+        self._innovation_score = (self._innovation_score_of(n_recent, mean, rms, same_sign)
+                                  if self._innovation_counts(m, n_recent) else 0.0)
+        estimate = self._report(now_s, speed, residual_ss, normal, w.scratch[2, lo:hi], w_sum, m)
+        self._detect_jump(now_s, self._innovation_score)
+        return estimate
 
     def _solve_numpy(self, sw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """`_solve_compiled` on the numpy path: `_normal` driven by `trust_region.solve_normal`."""
@@ -835,8 +854,10 @@ class LugreTrustRegionEstimator:
         self._radius = max(result.radius, 1e-3)
         return result.normal, r_data
 
-    def _report(self, now_s: float, speed: float, r_data: np.ndarray, normal: np.ndarray, weights: np.ndarray,
-                w_sum: float, slip: np.ndarray, wheel: np.ndarray) -> FrictionEstimate:
+    def _report(self, now_s: float, speed: float, residual_ss: float, normal: np.ndarray, weights: np.ndarray,
+                w_sum: float, samples: int) -> FrictionEstimate:
+        """The estimate from the fit just made: `residual_ss` is the weighted data residuals' sum
+        of squares, `weights` the window samples' forgetting weights, `samples` their number."""
         o = self.options
         x = self._x
         p = self._params(x)
@@ -857,7 +878,7 @@ class LugreTrustRegionEstimator:
             self._slip_floor, self._slip_support = self._slip_range(weights)
         # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
         dof = max(w_sum - len(x), 1.0)
-        variance_factor = max(1.0, float(r_data @ r_data) / dof)
+        variance_factor = max(1.0, residual_ss / dof)
         if self._cov_unit is None or self._due(2):
             # Parameters held at a bound are fixed there for the covariance: the unconstrained
             # Gauss–Newton covariance would count spread into the infeasible side. Like the
@@ -890,13 +911,13 @@ class LugreTrustRegionEstimator:
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(theta_list) / N_WHEELS
-        detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(len(slip)),
+        detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(samples),
                   "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
                   "jumps": float(self._jumps)}
         for key, s in zip(_WHEEL_STD_KEYS, wheel_std):
             detail[key] = float(s)
         if excitation > 0:
-            self._balance_axles(now_s, wheel_mu, weights, wheel)
+            self._balance_axles(now_s, wheel_mu)
         # Hysteresis: an estimate that was VALID last cycle (and not since invalidated by a jump)
         # stays VALID down to `keep_valid_confidence`. A one-cycle dip just under the threshold
         # (the drift term reacting to a 5 % correction when an ABS cycle adds samples nearer the
@@ -1007,7 +1028,7 @@ class LugreTrustRegionEstimator:
         a = self._axle_balance
         return math.exp(0.35 * a) if wheel < 2 else math.exp(-0.65 * a)
 
-    def _balance_axles(self, now_s: float, wheel_mu: np.ndarray, weights: np.ndarray, wheel: np.ndarray) -> None:
+    def _balance_axles(self, now_s: float, wheel_mu: np.ndarray) -> None:
         """Learn the front/rear split of the brake-gain error.
 
         Pad friction drifts per axle (±20 %); the front end's body-equation check only fixes the

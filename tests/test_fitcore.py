@@ -390,3 +390,54 @@ def test_append_instant_fills_the_window_as_append_does():
         core.append_samples((compiled.slip, compiled.speed, compiled.mu, compiled.time, compiled.wheel, compiled.lam_v,
                              compiled.pow_lam_v, compiled.stiff), 63, [0.1, 0.1], 10.0, [0.5, 0.5], 1.0, [0, 1],
                             0.5, 0.2, 0.98)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+@pytest.mark.parametrize("trim", [0, 37])
+def test_fit_window_is_weights_solve_and_bias_on_the_window(trim):
+    """`fit_window` on the window's own columns [lo, hi) gives what its steps give on slices."""
+    est, _ = _window_problem(duration=1.0)
+    w = est._window
+    w.start += trim            # (not from column 0: the offsets must be applied to every column)
+    lo, hi = w.start, w.end
+    m = hi - lo
+    times = w.time[lo:hi]
+    now, tau, sigma = float(times[-1]) + 0.003, 0.4, 0.02
+    jump_t = float(times[m - 60])
+    weights, sw = np.empty(m), np.empty(m)
+    w_sum = core.weights(times, now, tau, sigma, weights, sw)
+    x0 = est._x + 0.05
+    x_steps = x0.copy()
+    normal, gradient, r_data = np.empty((7, 7)), np.empty(7), np.empty(m)
+    rows = np.empty((m, 5))
+    steps = core.solve(w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, x_steps,
+                       est._lb, est._ub, est._prior, est._inv_prior_std, est._tie_rel_d, gradient, normal, r_data,
+                       np.empty(m), est._core_constants, 0.5, 8, 1e-6, 1e-6, 1e-8, 1e-3, 4, (rows, x0, 0))
+    first = int(times.searchsorted(jump_t, side="left"))
+    bias = core.residual_bias(r_data, weights, first, sigma)
+
+    x = x0.copy()
+    c_normal, c_gradient = np.empty((7, 7)), np.empty(7)
+    got = core.fit_window(w.core_columns, lo, hi, now, tau, sigma, jump_t, x, est._lb, est._ub, est._prior,
+                          est._inv_prior_std, est._tie_rel_d, c_gradient, c_normal, est._core_constants, 0.5, 8,
+                          1e-6, 1e-6, 1e-8, 1e-3, 4, x0, 0)
+    assert got[0] == w_sum and got[1] == steps[1]
+    np.testing.assert_array_equal(x, x_steps)
+    np.testing.assert_array_equal(c_normal, normal)
+    np.testing.assert_array_equal(w.scratch[0, lo:hi], r_data)
+    np.testing.assert_array_equal(w.scratch[2, lo:hi], weights)
+    np.testing.assert_array_equal(w.scratch[3, lo:hi], sw)
+    np.testing.assert_array_equal(w.core_rows[lo:hi], rows)
+    assert got[2] == pytest.approx(float(r_data @ r_data), rel=1e-13)
+    assert got[3] == first and got[4:] == bias
+    # No sample at or after jump_t: no bias, none made up.
+    assert core.fit_window(w.core_columns, lo, hi, now, tau, sigma, now + 1.0, x0.copy(), est._lb, est._ub, est._prior,
+                           est._inv_prior_std, est._tie_rel_d, c_gradient, c_normal, est._core_constants, 0.5, 0,
+                           1e-6, 1e-6, 1e-8, 1e-3, 4, x0, 0)[3:] == (m, 0.0, 0.0, 0.0)
+    for bad_lo, bad_hi, bad_cached in ((hi, hi, 0), (lo, w.capacity + 1, 0), (lo, hi, m + 1), (-1, hi, 0)):
+        with pytest.raises(ValueError, match="outside"):
+            core.fit_window(w.core_columns, bad_lo, bad_hi, now, tau, sigma, jump_t, x0.copy(), est._lb, est._ub,
+                            est._prior, est._inv_prior_std, est._tie_rel_d, c_gradient, c_normal,
+                            est._core_constants, 0.5, 8, 1e-6, 1e-6, 1e-8, 1e-3, 4, x0, bad_cached)
+    assert core.search_left(w.time, lo, hi, jump_t) == lo + first
+    assert core.search_left(w.time, lo, hi, math.nan) == hi == lo + int(times.searchsorted(math.nan))

@@ -743,39 +743,19 @@ static double quantile_sorted(const double *v, Py_ssize_t n, double q)
  * slips and μ of order k_lo, k_hi (k = n // 10 from each end, as the excitation test takes
  * them); the fastest slip run-away over `lag` samples whose force did not follow; the sums
  * of the through-origin quadratic fit. estimator._wheel_stats_numpy is the reference. */
-static PyObject *py_wheel_stats(PyObject *self, PyObject *args)
+/* estimator._wheel_stats_numpy over m samples: a tuple of four 12-tuples (NULL with an exception). */
+static PyObject *wheel_stats_of(const double *slip, const double *mu, const Py_ssize_t *wheel, const double *times,
+                                Py_ssize_t m, int lag, double elasticity)
 {
-    (void)self;
-    PyObject *objs[4];
-    int lag;
-    double elasticity;
-    if (!PyArg_ParseTuple(args, "OOOOid:wheel_stats", &objs[0], &objs[1], &objs[2], &objs[3], &lag, &elasticity))
-        return NULL;
-    static const char *names[4] = {"slip", "mu", "wheel", "times"};
-    Buf b[4];
-    memset(b, 0, sizeof b);
-    PyObject *result = NULL;
-    double *work = NULL;
-    Py_ssize_t m = -1;
-    for (int i = 0; i < 4; i++) {
-        if (get_array(objs[i], &b[i], names[i], m, 0, i == 2) < 0)
-            goto out;
-        if (i == 0)
-            m = b[0].view.len / 8;
-    }
     if (lag < 1) {
         PyErr_SetString(PyExc_ValueError, "lag: must be >= 1");
-        goto out;
+        return NULL;
     }
-    const double *slip = b[0].view.buf, *mu = b[1].view.buf, *times = b[3].view.buf;
-    const Py_ssize_t *wheel = b[2].view.buf;
-    work = PyMem_Malloc((size_t)(4 * (m + 1)) * sizeof(double));
-    if (!work) {
-        PyErr_NoMemory();
-        goto out;
-    }
+    double *work = PyMem_Malloc((size_t)(4 * (m + 1)) * sizeof(double));
+    if (!work)
+        return PyErr_NoMemory();
     double *lam = work, *mus = work + (m + 1), *ts = work + 2 * (m + 1), *sorted = work + 3 * (m + 1);
-    result = PyTuple_New(NW);
+    PyObject *result = PyTuple_New(NW);
     if (!result)
         goto out;
     for (int w = 0; w < NW; w++) {
@@ -842,7 +822,80 @@ static PyObject *py_wheel_stats(PyObject *self, PyObject *args)
     }
 out:
     PyMem_Free(work);
+    return result;
+}
+
+static PyObject *py_wheel_stats(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *objs[4];
+    int lag;
+    double elasticity;
+    if (!PyArg_ParseTuple(args, "OOOOid:wheel_stats", &objs[0], &objs[1], &objs[2], &objs[3], &lag, &elasticity))
+        return NULL;
+    static const char *names[4] = {"slip", "mu", "wheel", "times"};
+    Buf b[4];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    Py_ssize_t m = -1;
+    for (int i = 0; i < 4; i++) {
+        if (get_array(objs[i], &b[i], names[i], m, 0, i == 2) < 0)
+            goto out;
+        if (i == 0)
+            m = b[0].view.len / 8;
+    }
+    result = wheel_stats_of(b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, m, lag, elasticity);
+out:
     release_all(b, 4);
+    return result;
+}
+
+/* recent_wheel_stats(slip, columns, lo, hi, threshold, lag, elasticity) -> wheel_stats of the window's
+ * samples [k, hi) whose forgetting weight (fit_window's, scratch row 2) exceeds `threshold`, k found
+ * as numpy's weights[lo:hi].searchsorted(threshold, side="right"); columns as fit_window's. */
+static PyObject *py_recent_wheel_stats(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_slip, *columns;
+    Py_ssize_t lo, hi;
+    double threshold, elasticity;
+    int lag;
+    if (!PyArg_ParseTuple(args, "OO!nndid:recent_wheel_stats", &o_slip, &PyTuple_Type, &columns, &lo, &hi, &threshold,
+                          &lag, &elasticity))
+        return NULL;
+    if (PyTuple_GET_SIZE(columns) != 8) {
+        PyErr_SetString(PyExc_ValueError, "recent_wheel_stats: columns are fit_window's 8");
+        return NULL;
+    }
+    Buf b[5];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    if (get_array(o_slip, &b[0], "slip", -1, 0, 0) < 0)
+        goto out;
+    const Py_ssize_t cap = b[0].view.len / 8;
+    if (get_array(PyTuple_GET_ITEM(columns, 3), &b[1], "mu", cap, 0, 0) < 0
+        || get_array(PyTuple_GET_ITEM(columns, 4), &b[2], "wheel", cap, 0, 1) < 0
+        || get_array(PyTuple_GET_ITEM(columns, 5), &b[3], "time", cap, 0, 0) < 0
+        || get_array(PyTuple_GET_ITEM(columns, 6), &b[4], "scratch", 4 * cap, 0, 0) < 0)
+        goto out;
+    if (lo < 0 || hi < lo || hi > cap) {
+        PyErr_SetString(PyExc_ValueError, "recent_wheel_stats: lo, hi outside the window");
+        goto out;
+    }
+    const double *w = (const double *)b[4].view.buf + 2 * cap;
+    Py_ssize_t k = lo, end = hi;   /* side="right": the first weight beyond the threshold */
+    while (k < end) {
+        const Py_ssize_t mid = k + (end - k) / 2;
+        if (threshold < w[mid] || (w[mid] != w[mid] && threshold == threshold))
+            end = mid;
+        else
+            k = mid + 1;
+    }
+    result = wheel_stats_of((const double *)b[0].view.buf + k, (const double *)b[1].view.buf + k,
+                            (const Py_ssize_t *)b[2].view.buf + k, (const double *)b[3].view.buf + k, hi - k, lag,
+                            elasticity);
+out:
+    release_all(b, 5);
     return result;
 }
 
@@ -1323,6 +1376,9 @@ static PyMethodDef methods[] = {
     {"wheel_stats", py_wheel_stats, METH_VARARGS,
      "wheel_stats(slip, mu, wheel, times, lag, elasticity) -> 4 tuples of 12 floats\n\n"
      "estimator._wheel_stats_numpy: n, q10, q90, lam_lo, lam_hi, mu_hi, run-away rate, s2, s3, s4, y1, y2."},
+    {"recent_wheel_stats", py_recent_wheel_stats, METH_VARARGS,
+     "recent_wheel_stats(slip, columns, lo, hi, threshold, lag, elasticity) -> wheel_stats of the window's\n"
+     "samples whose forgetting weight (scratch row 2, from fit_window) exceeds threshold"},
     {"peak_report", py_peak_report, METH_VARARGS,
      "peak_report(wheel_mu, wheel_lam, support, slip_floor, peak_extrapolation, extrapolation_max_slip, thetas,\n"
      "            v, params, (sc4, sc5, sc6), cov_unit,\n"

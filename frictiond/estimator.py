@@ -376,6 +376,8 @@ class LugreTrustRegionEstimator:
         # over ~50 ms. Counts fixed for 10 ms asked a 20 ms car for twice the time.
         self._min_wheel_samples = max(5, round(0.1 / sample_period_s))
         self._runaway_lag = max(2, round(0.05 / sample_period_s))
+        # The forgetting weight of a sample `excitation_window_s` old: newer ones are "recent".
+        self._recent_threshold = math.exp(-o.excitation_window_s / o.forgetting_time_constant)
         # Room for a whole window at twice the expected rate, four wheels a sample (a window
         # that outgrows it loses its oldest quarter); bounded so that a window_s of hours does not
         # preallocate gigabytes.
@@ -384,6 +386,7 @@ class LugreTrustRegionEstimator:
         self._scale = np.array([1.0] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, max(o.prior_sigma2, 1e-3)])
         self._lb = np.array([math.log(o.theta_min)] * N_WHEELS + [o.sigma0_min, o.v_s_min, o.sigma2_min]) / self._scale
         self._ub = np.array([math.log(o.theta_max)] * N_WHEELS + [o.sigma0_max, o.v_s_max, o.sigma2_max]) / self._scale
+        self._theta_bounds = list(zip(self._lb[:N_WHEELS].tolist(), self._ub[:N_WHEELS].tolist()))
         self._prior_std = np.array([o.prior_std_log_theta] * N_WHEELS + [o.prior_std_sigma0, o.prior_std_v_s,
                                                                          o.prior_std_sigma2]) / self._scale
         self._base = LugreParams(mu_c=o.mu_c, mu_s=o.mu_s, alpha=o.alpha, patch_length=o.patch_length)
@@ -408,7 +411,7 @@ class LugreTrustRegionEstimator:
         self._alpha = float(o.alpha)
         self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
         self._prior_peak: tuple[tuple, tuple] | None = None   # (speed, prior) → peak of the prior
-        self._params_cache: tuple[tuple, LugreParams] | None = None
+        self._params_cache: tuple[tuple, tuple[LugreParams, tuple[float, ...]]] | None = None
         self._core_constants = (float(o.mu_c), float(o.mu_s - o.mu_c), self._alpha) + self._shared_scale
         self._gradient_buffer, self._normal_buffer = np.empty(len(self._scale)), np.empty((len(self._scale),) * 2)
         # The compiled fit when installed; `None` runs the numpy path (tests, benchmarks compare).
@@ -439,9 +442,9 @@ class LugreTrustRegionEstimator:
         self._innovation_score = 0.0
         self._last_jump_s = -math.inf
         self._last_peak_slips: list[float] | None = None
-        self._slip_support: np.ndarray | None = None
+        self._slip_support: list[float] | None = None
         self._capped: np.ndarray | None = None
-        self._slip_floor = np.zeros(N_WHEELS)
+        self._slip_floor = [0.0] * N_WHEELS
         self._excited_since_s = math.inf
         self._peak_seen = False
         self._last_fit_s = -math.inf
@@ -595,6 +598,13 @@ class LugreTrustRegionEstimator:
         return np.exp(x[:N_WHEELS])
 
     def _params(self, x: np.ndarray) -> LugreParams:
+        return self._params_and_compiled(x)[0]
+
+    def _compiled_params(self, x: np.ndarray) -> tuple[float, ...]:
+        """`compiled_params(self._params(x))`, kept with it."""
+        return self._params_and_compiled(x)[1]
+
+    def _params_and_compiled(self, x: np.ndarray) -> tuple[LugreParams, tuple[float, ...]]:
         key = tuple(x[N_WHEELS:].tolist())
         cached = self._params_cache
         if cached is not None and cached[0] == key:
@@ -602,8 +612,9 @@ class LugreTrustRegionEstimator:
         sigma0, v_s, sigma2 = (v * s for v, s in zip(key, self._shared_scale))
         p = LugreParams(theta=1.0, sigma0=sigma0, sigma2=sigma2, mu_c=self._base.mu_c, mu_s=self._base.mu_s,
                         v_s=v_s, alpha=self._base.alpha, patch_length=self._base.patch_length)
-        self._params_cache = (key, p)
-        return p
+        pair = (p, compiled_params(p))
+        self._params_cache = (key, pair)
+        return pair
 
     def _weights(self, now_s: float, times: np.ndarray) -> np.ndarray:
         return np.exp(np.minimum(times - now_s, 0.0) / self.options.forgetting_time_constant)
@@ -830,7 +841,7 @@ class LugreTrustRegionEstimator:
         n_recent = m - first
         self._innovation_score = (self._innovation_score_of(n_recent, mean, rms, same_sign)
                                   if self._innovation_counts(m, n_recent) else 0.0)
-        estimate = self._report(now_s, speed, residual_ss, normal, w.scratch[2, lo:hi], w_sum, m)
+        estimate = self._report(now_s, speed, residual_ss, normal, None, w_sum, m)
         self._detect_jump(now_s, self._innovation_score)
         return estimate
 
@@ -857,7 +868,8 @@ class LugreTrustRegionEstimator:
     def _report(self, now_s: float, speed: float, residual_ss: float, normal: np.ndarray, weights: np.ndarray,
                 w_sum: float, samples: int) -> FrictionEstimate:
         """The estimate from the fit just made: `residual_ss` is the weighted data residuals' sum
-        of squares, `weights` the window samples' forgetting weights, `samples` their number."""
+        of squares, `weights` the window samples' forgetting weights (None on the compiled path,
+        where they stay in the window's scratch), `samples` their number."""
         o = self.options
         x = self._x
         p = self._params(x)
@@ -867,7 +879,7 @@ class LugreTrustRegionEstimator:
         theta_list = thetas.tolist()
         found = None
         if self.core is not None and near is not None:
-            found = self.core.peaks_near(v_eval, theta_list, near, compiled_params(p))
+            found = self.core.peaks_near(v_eval, theta_list, near, self._compiled_params(x))
             near = None   # (tried: what is left is the grid search)
         if found is None:
             grid_mu, grid_lam = peaks(v_eval, p, thetas, near=near)
@@ -896,11 +908,11 @@ class LugreTrustRegionEstimator:
                 except np.linalg.LinAlgError:
                     cov[:] = np.inf
             self._cov_unit = cov
-        args = (wheel_mu, wheel_lam, self._slip_support.tolist(), self._slip_floor.tolist(),
+        args = (wheel_mu, wheel_lam, self._slip_support, self._slip_floor,
                 o.peak_extrapolation, o.extrapolation_max_slip, theta_list, v_eval)
         tail = (self._shared_scale, self._cov_unit, variance_factor, self._load_share)
         if self.core is not None:
-            numbers = self.core.peak_report(*args, compiled_params(p), *tail)
+            numbers = self.core.peak_report(*args, self._compiled_params(x), *tail)
         else:
             numbers = _peak_report_numpy(*args, p, *tail)
         wheel_mu, wheel_lam, self._capped, mu_max, slip_star, mu_std, wheel_std = numbers
@@ -1053,7 +1065,7 @@ class LugreTrustRegionEstimator:
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
         self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
 
-    def _slip_range(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _slip_range(self, weights: np.ndarray | None) -> tuple[list[float], list[float]]:
         """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
         without data gets (0, ∞): no bound on either side."""
         low = [0.0] * N_WHEELS
@@ -1061,25 +1073,32 @@ class LugreTrustRegionEstimator:
         for i, stats in enumerate(self._wheel_stats(weights)):
             if stats[0] >= self._min_wheel_samples:
                 low[i], high[i] = max(0.0, stats[1]), stats[2]
-        return np.array(low), np.array(high)
+        return low, high
 
-    def _wheel_stats(self, weights: np.ndarray) -> tuple[tuple[float, ...], ...]:
-        """`_wheel_stats_numpy` of the window's newest `excitation_window_s` (compiled when built)."""
+    def _wheel_stats(self, weights: np.ndarray | None) -> tuple[tuple[float, ...], ...]:
+        """`_wheel_stats_numpy` of the window's newest `excitation_window_s` (compiled when built:
+        on the window's columns and the weights `fit_window` left there; `weights` is not used)."""
         w = self._window
+        o = self.options
+        if self.core is not None:
+            return self.core.recent_wheel_stats(w.slip, w.core_columns, w.start, w.end, self._recent_threshold,
+                                                self._runaway_lag, o.excitation_runaway_elasticity)
         lo = w.start + self._recent_start(weights)
         args = (w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end], w.time[lo:w.end], self._runaway_lag,
                 self.options.excitation_runaway_elasticity)
-        return self.core.wheel_stats(*args) if self.core is not None else _wheel_stats_numpy(*args)
+        return _wheel_stats_numpy(*args)
 
     def _recent_start(self, weights: np.ndarray) -> int:
         """Index of the first window sample weighted above the excitation window's threshold
         (the newest `excitation_window_s`); the weights rise along the window."""
-        o = self.options
-        return int(weights.searchsorted(math.exp(-o.excitation_window_s / o.forgetting_time_constant), side="right"))
+        return int(weights.searchsorted(self._recent_threshold, side="right"))
 
     def _fit_at_high_slip(self, speed: float) -> np.ndarray:
         """The fitted μ of each wheel at the high end of its recent slips."""
-        lam_hi = [s if math.isfinite(s) else 1e-3 for s in self._slip_support.tolist()]
+        lam_hi = [s if math.isfinite(s) else 1e-3 for s in self._slip_support]
+        if self.core is not None:   # (braking_mu_and_partials_few's compiled call, without its arrays)
+            return self.core.mu_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x).tolist(),
+                                             self._compiled_params(self._x))[0]
         mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
         return mu
 
@@ -1107,8 +1126,8 @@ class LugreTrustRegionEstimator:
         why = self.excitation_reasons = ["", "", "", ""]
         fit_at_hi = self._fit_at_high_slip(speed)
         # A θ held at its bound is not where the data put it: its peak proves nothing.
-        at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, lb, ub in
-                    zip(self._x[:N_WHEELS].tolist(), self._lb[:N_WHEELS].tolist(), self._ub[:N_WHEELS].tolist())]
+        at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
+                    zip(self._x[:N_WHEELS].tolist(), self._theta_bounds)]
         for i in range(N_WHEELS):
             if at_bound[i]:
                 why[i] = "θ at its bound"

@@ -441,3 +441,11 @@ def test_fit_window_is_weights_solve_and_bias_on_the_window(trim):
                             est._core_constants, 0.5, 8, 1e-6, 1e-6, 1e-8, 1e-3, 4, x0, bad_cached)
     assert core.search_left(w.time, lo, hi, jump_t) == lo + first
     assert core.search_left(w.time, lo, hi, math.nan) == hi == lo + int(times.searchsorted(math.nan))
+    # The excitation's statistics on the same columns, from the weights fit_window left there.
+    for threshold in (math.exp(-0.1 / tau), 0.5, 2.0):
+        k = lo + int(weights.searchsorted(threshold, side="right"))
+        np.testing.assert_array_equal(
+            np.array(core.recent_wheel_stats(w.slip, w.core_columns, lo, hi, threshold, 5, 0.5)),
+            np.array(core.wheel_stats(w.slip[k:hi], w.mu[k:hi], w.wheel[k:hi], w.time[k:hi], 5, 0.5)))
+    with pytest.raises(ValueError, match="outside"):
+        core.recent_wheel_stats(w.slip, w.core_columns, lo, w.capacity + 1, 0.5, 5, 0.5)

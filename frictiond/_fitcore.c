@@ -1326,6 +1326,74 @@ out:
     return result;
 }
 
+/* drift_reference(history, since, span) -> float | None: LugreTrustRegionEstimator._confidence's
+ * reference, the median of the μ_max of the (time, μ_max) pairs of `history` (ascending times)
+ * from the first at or after `since` to `span` after it. None when some of those values are NaN
+ * (Python's sort puts them where its comparisons happen to; the caller's loop decides then). */
+static PyObject *py_drift_reference(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *history;
+    double since, span;
+    if (!PyArg_ParseTuple(args, "Odd:drift_reference", &history, &since, &span))
+        return NULL;
+    const Py_ssize_t size = PyObject_Length(history);
+    if (size < 0)
+        return NULL;
+    double *values = PyMem_Malloc((size_t)(size + 1) * sizeof(double));
+    if (!values)
+        return PyErr_NoMemory();
+    PyObject *it = PyObject_GetIter(history), *item, *result = NULL;
+    if (!it)
+        goto out;
+    Py_ssize_t n = 0;
+    double until = INFINITY;
+    int has_nan = 0;
+    while ((item = PyIter_Next(it))) {
+        double t = 0.0, m = 0.0;
+        const int ok = PyTuple_Check(item) && PyTuple_GET_SIZE(item) == 2;
+        if (ok) {
+            t = PyFloat_AsDouble(PyTuple_GET_ITEM(item, 0));
+            m = PyFloat_AsDouble(PyTuple_GET_ITEM(item, 1));
+        }
+        Py_DECREF(item);
+        if (!ok) {
+            PyErr_SetString(PyExc_TypeError, "drift_reference: history holds (time, mu_max) pairs");
+            goto out;
+        }
+        if (PyErr_Occurred())
+            goto out;
+        if (t < since)
+            continue;
+        if (n == 0)
+            until = t + span;
+        else if (t > until)
+            break;
+        if (n >= size) {   /* (the deque grew while iterated: not from this single-threaded caller) */
+            PyErr_SetString(PyExc_RuntimeError, "drift_reference: history changed size");
+            goto out;
+        }
+        has_nan |= m != m;
+        values[n++] = m;
+    }
+    if (PyErr_Occurred())
+        goto out;
+    if (n == 0) {
+        PyErr_SetString(PyExc_ValueError, "drift_reference: no value at or after since");
+        goto out;
+    }
+    if (has_nan) {
+        result = Py_NewRef(Py_None);
+        goto out;
+    }
+    qsort(values, n, sizeof(double), cmp_double);
+    result = PyFloat_FromDouble(values[n / 2]);
+out:
+    Py_XDECREF(it);
+    PyMem_Free(values);
+    return result;
+}
+
 /* search_left(times, lo, hi, t) -> int: numpy's `times[lo:hi].searchsorted(t, side="left") + lo`
  * (the first k with times[k] >= t; NaN sorts last), on a float64 array without the slice. */
 static PyObject *py_search_left(PyObject *self, PyObject *args)
@@ -1394,6 +1462,9 @@ static PyMethodDef methods[] = {
      "fit_window(arrays, lo, hi, now, tau, sigma, jump_t, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
      "constants, radius, max_iterations, ftol, xtol, gtol, predicted_ftol, max_rejections, rows_x, cached_n)\n"
      "-> (w_sum, radius, r.r, first, mean, rms, same_sign): weights, solve and residual_bias on the window's columns"},
+    {"drift_reference", py_drift_reference, METH_VARARGS,
+     "drift_reference(history, since, span) -> float | None: the median mu_max of the (time, mu_max) pairs\n"
+     "from the first at or after since to span after it; None when one of them is NaN"},
     {"search_left", py_search_left, METH_VARARGS,
      "search_left(times, lo, hi, t) -> int: times[lo:hi].searchsorted(t, side='left') + lo"},
     {NULL, NULL, 0, NULL},

@@ -299,7 +299,7 @@ class _Window:
     def has_recent(self, axle: int, since_s: float) -> bool:
         """Whether the window holds a sample of the axle (0 front, 1 rear) newer than `since_s`."""
         t = self.last_time_by_axle[axle]
-        return t > since_s and self.end > self.start and t >= self.time[self.start]
+        return t > since_s and self.end > self.start and t >= self.time.item(self.start)
 
     def _compact(self) -> None:
         """Move the window's samples to the front of the columns."""
@@ -411,7 +411,7 @@ class LugreTrustRegionEstimator:
         self._alpha = float(o.alpha)
         self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
         self._prior_peak: tuple[tuple, tuple] | None = None   # (speed, prior) → peak of the prior
-        self._params_cache: tuple[tuple, tuple[LugreParams, tuple[float, ...]]] | None = None
+        self._params_cache: tuple[tuple, list] | None = None
         self._core_constants = (float(o.mu_c), float(o.mu_s - o.mu_c), self._alpha) + self._shared_scale
         self._gradient_buffer, self._normal_buffer = np.empty(len(self._scale)), np.empty((len(self._scale),) * 2)
         # The compiled fit when installed; `None` runs the numpy path (tests, benchmarks compare).
@@ -598,23 +598,30 @@ class LugreTrustRegionEstimator:
         return np.exp(x[:N_WHEELS])
 
     def _params(self, x: np.ndarray) -> LugreParams:
-        return self._params_and_compiled(x)[0]
+        entry = self._params_entry(x)
+        if entry[1] is None:
+            sigma0, v_s, sigma2 = entry[0][3], entry[0][5], entry[0][6]
+            b = self._base
+            entry[1] = LugreParams(theta=1.0, sigma0=sigma0, sigma2=sigma2, mu_c=b.mu_c, mu_s=b.mu_s, v_s=v_s,
+                                   alpha=b.alpha, patch_length=b.patch_length)
+        return entry[1]
 
     def _compiled_params(self, x: np.ndarray) -> tuple[float, ...]:
-        """`compiled_params(self._params(x))`, kept with it."""
-        return self._params_and_compiled(x)[1]
+        """`compiled_params(self._params(x))` (σ0, v_s, σ2 at 3, 5, 6), without building the
+        LugreParams (a frozen dataclass costs more than the compiled calls it feeds)."""
+        return self._params_entry(x)[0]
 
-    def _params_and_compiled(self, x: np.ndarray) -> tuple[LugreParams, tuple[float, ...]]:
+    def _params_entry(self, x: np.ndarray) -> list:
+        """[compiled parameters, LugreParams or None until asked for] of the shared parameters in x."""
         key = tuple(x[N_WHEELS:].tolist())
         cached = self._params_cache
         if cached is not None and cached[0] == key:
             return cached[1]
         sigma0, v_s, sigma2 = (v * s for v, s in zip(key, self._shared_scale))
-        p = LugreParams(theta=1.0, sigma0=sigma0, sigma2=sigma2, mu_c=self._base.mu_c, mu_s=self._base.mu_s,
-                        v_s=v_s, alpha=self._base.alpha, patch_length=self._base.patch_length)
-        pair = (p, compiled_params(p))
-        self._params_cache = (key, pair)
-        return pair
+        b = self._base
+        entry = [(b.mu_c, b.mu_s - b.mu_c, b.alpha, sigma0, sigma0 * b.patch_length, v_s, sigma2), None]
+        self._params_cache = (key, entry)
+        return entry
 
     def _weights(self, now_s: float, times: np.ndarray) -> np.ndarray:
         return np.exp(np.minimum(times - now_s, 0.0) / self.options.forgetting_time_constant)
@@ -872,17 +879,17 @@ class LugreTrustRegionEstimator:
         where they stay in the window's scratch), `samples` their number."""
         o = self.options
         x = self._x
-        p = self._params(x)
+        shared = self._compiled_params(x)   # (σ0, v_s, σ2 at 3, 5, 6)
         thetas = self._thetas(x)
         v_eval = max(speed, 1.0)
         near = self._last_peak_slips
         theta_list = thetas.tolist()
         found = None
         if self.core is not None and near is not None:
-            found = self.core.peaks_near(v_eval, theta_list, near, self._compiled_params(x))
+            found = self.core.peaks_near(v_eval, theta_list, near, shared)
             near = None   # (tried: what is left is the grid search)
         if found is None:
-            grid_mu, grid_lam = peaks(v_eval, p, thetas, near=near)
+            grid_mu, grid_lam = peaks(v_eval, self._params(x), thetas, near=near)
             found = (grid_mu.tolist(), grid_lam.tolist())
         wheel_mu, wheel_lam = found
         self._last_peak_slips = wheel_lam
@@ -912,9 +919,9 @@ class LugreTrustRegionEstimator:
                 o.peak_extrapolation, o.extrapolation_max_slip, theta_list, v_eval)
         tail = (self._shared_scale, self._cov_unit, variance_factor, self._load_share)
         if self.core is not None:
-            numbers = self.core.peak_report(*args, self._compiled_params(x), *tail)
+            numbers = self.core.peak_report(*args, shared, *tail)
         else:
-            numbers = _peak_report_numpy(*args, p, *tail)
+            numbers = _peak_report_numpy(*args, self._params(x), *tail)
         wheel_mu, wheel_lam, self._capped, mu_max, slip_star, mu_std, wheel_std = numbers
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
@@ -924,7 +931,7 @@ class LugreTrustRegionEstimator:
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(theta_list) / N_WHEELS
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(samples),
-                  "sigma0": float(p.sigma0), "v_s": float(p.v_s), "sigma2": float(p.sigma2),
+                  "sigma0": float(shared[3]), "v_s": float(shared[5]), "sigma2": float(shared[6]),
                   "jumps": float(self._jumps)}
         for key, s in zip(_WHEEL_STD_KEYS, wheel_std):
             detail[key] = float(s)
@@ -1010,18 +1017,21 @@ class LugreTrustRegionEstimator:
         # ice) would otherwise cost the confidence twice, when it happens and again a drift
         # window later as the reference, making a settled estimate CONVERGING for a cycle.
         since = now_s - o.drift_window_s * (7.0 / 6.0)
-        values: list[float] = []
-        until = math.inf
-        for t, m in history:     # (ascending times)
-            if t < since:
-                continue
-            if not values:
-                until = t + o.drift_window_s / 3.0
-            elif t > until:
-                break
-            values.append(m)
-        values.sort()
-        reference = values[len(values) // 2]   # (never empty: this fit was just appended)
+        reference = (self.core.drift_reference(history, since, o.drift_window_s / 3.0) if self.core is not None
+                     else None)
+        if reference is None:
+            values: list[float] = []
+            until = math.inf
+            for t, m in history:     # (ascending times)
+                if t < since:
+                    continue
+                if not values:
+                    until = t + o.drift_window_s / 3.0
+                elif t > until:
+                    break
+                values.append(m)
+            values.sort()
+            reference = values[len(values) // 2]   # (never empty: this fit was just appended)
         scale = max(mu_max, 0.05)
         drift = abs(mu_max - reference) / scale
         rel_std = mu_std / scale if math.isfinite(mu_std) else 10.0

@@ -449,3 +449,36 @@ def test_fit_window_is_weights_solve_and_bias_on_the_window(trim):
             np.array(core.wheel_stats(w.slip[k:hi], w.mu[k:hi], w.wheel[k:hi], w.time[k:hi], 5, 0.5)))
     with pytest.raises(ValueError, match="outside"):
         core.recent_wheel_stats(w.slip, w.core_columns, lo, w.capacity + 1, 0.5, 5, 0.5)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_drift_reference_is_the_confidence_loop():
+    from collections import deque
+
+    def loop(history, since, span):   # LugreTrustRegionEstimator._confidence's own loop
+        values, until = [], math.inf
+        for t, m in history:
+            if t < since:
+                continue
+            if not values:
+                until = t + span
+            elif t > until:
+                break
+            values.append(m)
+        values.sort()
+        return values[len(values) // 2]
+
+    rng = np.random.default_rng(31)
+    for _ in range(300):
+        n = int(rng.integers(1, 60))
+        times = np.cumsum(rng.uniform(0.0, 0.02, n))   # (steps of 0: repeated times)
+        mus = rng.choice([0.2, 0.5, 0.8], n) + rng.normal(0, 0.01, n)
+        history = deque(zip(times.tolist(), mus.tolist()))
+        since = float(rng.uniform(-0.1, times[-1]))
+        span = float(rng.uniform(0.0, 0.3))
+        assert core.drift_reference(history, since, span) == loop(history, since, span)
+    assert core.drift_reference(deque([(0.0, 0.5), (0.01, math.nan), (0.02, 0.4)]), 0.0, 1.0) is None
+    with pytest.raises(ValueError, match="since"):
+        core.drift_reference(deque([(0.0, 0.5)]), 1.0, 1.0)
+    with pytest.raises(TypeError, match="pairs"):
+        core.drift_reference([(0.0, 0.5, 1.0)], 0.0, 1.0)

@@ -287,6 +287,66 @@ done:
     return result;
 }
 
+/* The FRICTION_WHEEL signals encode_wheels sets, interned at import. */
+static PyObject *K_crc, *K_counter, *K_wheel_index, *K_slip, *K_mu_used, *K_mu_max_wheel, *K_normal_force;
+
+/* encode_wheels(specs, length, data_id, counter, counter_bit, slips, mus_used, mus_max, loads, extra)
+ * -> [4 payloads] | None: OutputCodec.encode_wheels' four frames, wheel i with counter + i, each
+ * as encode_frame (its values: the wheel's numbers, a non-finite one as 0.0, and `extra`). None
+ * when a spec is missing or a frame is refused (the caller then takes the Python path). */
+static PyObject *py_encode_wheels(PyObject *self, PyObject *args)
+{
+    PyObject *specs, *quads[4], *extra;
+    Py_ssize_t length;
+    long long data_id, counter, counter_bit;
+    if (!PyArg_ParseTuple(args, "O!nLLLOOOOO!", &PyTuple_Type, &specs, &length, &data_id, &counter, &counter_bit,
+                          &quads[0], &quads[1], &quads[2], &quads[3], &PyDict_Type, &extra))
+        return NULL;
+    if (PyTuple_GET_SIZE(specs) != 4) {
+        PyErr_SetString(PyExc_ValueError, "encode_wheels: one spec per wheel");
+        return NULL;
+    }
+    PyObject *const keys[4] = {K_slip, K_mu_used, K_mu_max_wheel, K_normal_force};
+    PyObject *payloads = PyList_New(4);
+    if (!payloads)
+        return NULL;
+    for (Py_ssize_t i = 0; i < 4; i++) {
+        PyObject *spec = PyTuple_GET_ITEM(specs, i);
+        if (!PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) != 2 || !PyTuple_Check(PyTuple_GET_ITEM(spec, 1))) {
+            Py_DECREF(payloads);
+            Py_RETURN_NONE;
+        }
+        PyObject *values = PyDict_Copy(extra), *index = PyLong_FromSsize_t(i), *zero = PyLong_FromLong(0);
+        int failed = !values || !index || !zero || PyDict_SetItem(values, K_crc, zero) < 0
+                     || PyDict_SetItem(values, K_counter, zero) < 0 || PyDict_SetItem(values, K_wheel_index, index) < 0;
+        for (int q = 0; q < 4 && !failed; q++) {
+            PyObject *item = PySequence_GetItem(quads[q], i);
+            const double v = item ? PyFloat_AsDouble(item) : -1.0;
+            Py_XDECREF(item);
+            PyObject *number = (v == -1.0 && PyErr_Occurred()) ? NULL : PyFloat_FromDouble(isfinite(v) ? v : 0.0);
+            failed = !number || PyDict_SetItem(values, keys[q], number) < 0;
+            Py_XDECREF(number);
+        }
+        Py_XDECREF(index);
+        Py_XDECREF(zero);
+        Py_buffer view;
+        if (failed || PyObject_GetBuffer(PyTuple_GET_ITEM(spec, 0), &view, PyBUF_SIMPLE) < 0) {
+            Py_XDECREF(values);
+            Py_DECREF(payloads);
+            return NULL;
+        }
+        const long long e2e[3] = {data_id, (counter + i) & 0x0F, counter_bit};
+        PyObject *payload = packed(&view, PyTuple_GET_ITEM(spec, 1), values, length, e2e);
+        Py_DECREF(values);
+        if (!payload || payload == Py_None) {
+            Py_DECREF(payloads);
+            return payload;
+        }
+        PyList_SET_ITEM(payloads, i, payload);
+    }
+    return payloads;
+}
+
 static PyMethodDef methods[] = {
     {"unpack_si", py_unpack_si, METH_VARARGS,
      "unpack_si(fields, checks, si, names, counter, data) -> (values, counter value) | None\n\n"
@@ -301,6 +361,9 @@ static PyMethodDef methods[] = {
     {"encode_frame", py_encode_frame, METH_VARARGS,
      "encode_frame(spec, names, values, length, data_id, counter, counter_bit) -> bytes | None:\n"
      "pack, then protect; None as pack."},
+    {"encode_wheels", py_encode_wheels, METH_VARARGS,
+     "encode_wheels(specs, length, data_id, counter, counter_bit, slips, mus_used, mus_max, loads, extra)\n"
+     "-> [4 payloads] | None: the four FRICTION_WHEEL frames, wheel i with counter + i (encode_frame each)."},
     {"protect", py_protect, METH_VARARGS,
      "protect(data_id, payload, counter, counter_bit) -> bytes: e2e.protect on a copy."},
     {NULL, NULL, 0, NULL},
@@ -313,5 +376,11 @@ static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_codeccore",
 PyMODINIT_FUNC PyInit__codeccore(void)
 {
     make_crc_table();
+    if (!(K_crc = PyUnicode_InternFromString("Crc")) || !(K_counter = PyUnicode_InternFromString("Counter"))
+        || !(K_wheel_index = PyUnicode_InternFromString("WheelIndex")) || !(K_slip = PyUnicode_InternFromString("Slip"))
+        || !(K_mu_used = PyUnicode_InternFromString("MuUsed"))
+        || !(K_mu_max_wheel = PyUnicode_InternFromString("MuMaxWheel"))
+        || !(K_normal_force = PyUnicode_InternFromString("NormalForce")))
+        return NULL;
     return PyModule_Create(&module);
 }

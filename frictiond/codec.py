@@ -778,8 +778,17 @@ class OutputCodec:
         }, self._estimate_spec)
 
     def encode_wheels(self, estimate: FrictionEstimate, sample: PhysicalSample) -> list[bytes]:
-        payloads = []
         slips, mus_used, mus_max, loads = sample.slip, sample.mu_used, estimate.wheel_mu_max, sample.normal_force_n
+        if self.core is not None and None not in self._wheel_specs:
+            # The four frames in one compiled call (each as `_encode` would make it).
+            counter = self._counters[self.wheel_id]
+            payloads = self.core.encode_wheels(tuple(self._wheel_specs), self.wheel_message.length, self.wheel_id,
+                                               counter, self._counter_bit[self.wheel_id], slips, mus_used, mus_max,
+                                               loads, self._extra_values[self.wheel_id])
+            if payloads is not None:
+                self._counters[self.wheel_id] = (counter + len(payloads)) & 0x0F
+                return payloads
+        payloads = []
         for i, spec in enumerate(self._wheel_specs):
             payloads.append(self._encode(self.wheel_id, self.wheel_message, {
                 "Crc": 0, "Counter": 0, "WheelIndex": i,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import cantools
 import numpy as np
@@ -157,23 +158,39 @@ def test_protect_is_e2e_protect():
 
 
 @needs_core
-def test_output_frames_are_the_same_on_both_paths():
+@pytest.mark.parametrize("wheel_spare", [False, True])
+def test_output_frames_are_the_same_on_both_paths(tmp_path, wheel_spare):
     config = load_config(default_config_path())
-    compiled = OutputCodec(load_databases([config.can.output_dbc]))
-    floats = OutputCodec(load_databases([config.can.output_dbc]))
+    dbc = Path(config.can.output_dbc)
+    if wheel_spare:   # (a vehicle's FRICTION_WHEEL with a signal beyond the contract's: sent idle)
+        text = dbc.read_text().replace(
+            ' SG_ NormalForce m0 : 52|12@1+ (5,0) [0|20475] "N" VEHICLE\n',
+            ' SG_ NormalForce m0 : 52|10@1+ (20,0) [0|20460] "N" VEHICLE\n SG_ Spare : 62|2@1+ (1,1) [1|3] "" VEHICLE\n')
+        assert "Spare" in text
+        dbc = tmp_path / "out.dbc"
+        dbc.write_text(text)
+    compiled = OutputCodec(load_databases([dbc]))
+    floats = OutputCodec(load_databases([dbc]))
     floats.core = None
+    assert None not in compiled._wheel_specs   # (the wheels' compiled call is the one under test)
     rng = np.random.default_rng(13)
+
+    def quad(low, high):   # four numbers, now and then one not finite (sent as 0)
+        values = rng.uniform(low, high, 4)
+        if rng.random() < 0.2:
+            values[int(rng.integers(4))] = rng.choice([math.nan, math.inf, -math.inf])
+        return tuple(float(v) for v in values)
+
     for k in range(300):
         mu = float(rng.choice([rng.uniform(-0.5, 2.5), math.nan]))
         estimate = FrictionEstimate(0.01 * k, Status(int(rng.integers(0, 6))), mu, float(rng.uniform(0, 0.3)),
                                     float(rng.uniform(0.5, 2)), float(rng.uniform(0, 1)),
-                                    tuple(rng.uniform(0, 1.5, 4)), 0.05)
-        sample = PhysicalSample(0.01 * k, float(rng.uniform(0, 40)), tuple(rng.uniform(-0.2, 1.2, 4)),
-                                tuple(rng.uniform(-1, 1.5, 4)), tuple(rng.uniform(0, 9000, 4)),
-                                tuple(rng.uniform(0, 9000, 4)), (True,) * 4)
+                                    quad(0, 1.5) if k % 2 else list(quad(0, 1.5)), 0.05)
+        sample = PhysicalSample(0.01 * k, float(rng.uniform(0, 40)), quad(-0.2, 1.2), quad(-1, 1.5),
+                                quad(0, 9000), quad(0, 9000), (True,) * 4)
         assert compiled.encode_estimate(estimate) == floats.encode_estimate(estimate)
         assert compiled.encode_wheels(estimate, sample) == floats.encode_wheels(estimate, sample)
-    assert compiled._counters == floats._counters
+        assert compiled._counters == floats._counters
 
 
 def _decode_both(compiled, floats, frame):

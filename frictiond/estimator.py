@@ -288,6 +288,8 @@ class _Window:
         # samples within them).
         self.core_columns = (self.pow_lam_v, self.stiff, self.lam_v, self.mu, self.wheel, self.time, self.scratch,
                              self.core_rows)
+        self.append_columns = (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v,
+                               self.stiff)
 
     def __len__(self) -> int:
         return self.end - self.start
@@ -339,8 +341,7 @@ class _Window:
             for slip, mu, wheel in zip(slips, mus, wheels):
                 self.append(slip, speed, mu, time_s, wheel)
             return
-        core.append_samples((self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v,
-                             self.stiff), self.end, slips, speed, mus, time_s, wheels, self.alpha,
+        core.append_samples(self.append_columns, self.end, slips, speed, mus, time_s, wheels, self.alpha,
                             self.patch_length, MAX_MODEL_SLIP)
         for wheel in wheels:
             self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
@@ -434,6 +435,7 @@ class LugreTrustRegionEstimator:
         self._fits = 0
         self._jumps = 0
         self._axle_balance = 0.0
+        self._axle_scales_cache: tuple[float, tuple[float, float]] = (math.nan, (1.0, 1.0))
         self._last_sample_s = -math.inf
         self._load_share = [1.0 / N_WHEELS] * N_WHEELS
         self._mu_history: deque[tuple[float, float]] = deque()
@@ -544,7 +546,7 @@ class LugreTrustRegionEstimator:
         for i, (slip, usable, mu_used) in enumerate(zip(sample.slip, sample.usable, sample.mu_used)):
             if usable and slip >= o.min_slip and math.isfinite(mu_used):
                 if scales is None:
-                    scales = (self._axle_scale(0), self._axle_scale(2))
+                    scales = self._axle_scales()
                 slips.append(slip)
                 mus.append(mu_used * scales[i >= 2])
                 wheels.append(i)
@@ -933,8 +935,7 @@ class LugreTrustRegionEstimator:
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(samples),
                   "sigma0": float(shared[3]), "v_s": float(shared[5]), "sigma2": float(shared[6]),
                   "jumps": float(self._jumps)}
-        for key, s in zip(_WHEEL_STD_KEYS, wheel_std):
-            detail[key] = float(s)
+        detail.update(zip(_WHEEL_STD_KEYS, map(float, wheel_std)))
         if excitation > 0:
             self._balance_axles(now_s, wheel_mu)
         # Hysteresis: an estimate that was VALID last cycle (and not since invalidated by a jump)
@@ -1049,6 +1050,13 @@ class LugreTrustRegionEstimator:
         """Correction of a wheel's utilised μ for the front/rear brake-gain split (see below)."""
         a = self._axle_balance
         return math.exp(0.35 * a) if wheel < 2 else math.exp(-0.65 * a)
+
+    def _axle_scales(self) -> tuple[float, float]:
+        """(front, rear) `_axle_scale`, kept until the balance moves (it rests between stops)."""
+        cached = self._axle_scales_cache
+        if cached[0] != self._axle_balance:
+            cached = self._axle_scales_cache = (self._axle_balance, (self._axle_scale(0), self._axle_scale(2)))
+        return cached[1]
 
     def _balance_axles(self, now_s: float, wheel_mu: np.ndarray) -> None:
         """Learn the front/rear split of the brake-gain error.

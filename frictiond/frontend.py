@@ -206,6 +206,7 @@ class FrontEnd:
         }
         for m in message_signals:
             self._history.setdefault(m, _MessageHistory(options.default_period))
+        self._required_histories = tuple((m, self._history[m]) for m in sorted(self.required_messages))
         # One wheel-speed sample per trigger: the per-sample constants (the derivative window,
         # the forgetting of the brake-gain and accelerometer-offset learning) are set for the
         # trigger's cycle time, not for 10 ms. A 7-sample window at 20 ms spans 0.12 s, over
@@ -306,11 +307,10 @@ class FrontEnd:
         """Required messages whose last frame is older than `stale_periods` of their period."""
         limit = self.options.stale_periods
         stale = []
-        for m in self.required_messages:
-            h = self._history[m]
+        for m, h in self._required_histories:   # (in name order: the result comes sorted)
             if now_s - h.last_arrival_s > limit * h.period_s + 1e-3:
                 stale.append(m)
-        return tuple(sorted(stale))
+        return tuple(stale)
 
     def period_of(self, message: str) -> float:
         return self._history[message].period_s

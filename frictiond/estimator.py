@@ -440,7 +440,7 @@ class LugreTrustRegionEstimator:
         self._load_share = [1.0 / N_WHEELS] * N_WHEELS
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
-        self.excitation_reasons = ["", "", "", ""]
+        self._excitation_why: list = ["", "", "", ""]
         self._innovation_score = 0.0
         self._last_jump_s = -math.inf
         self._last_peak_slips: list[float] | None = None
@@ -465,7 +465,7 @@ class LugreTrustRegionEstimator:
         is left to expire as usual, but it is no longer renewed by stale excitation.
         """
         self._excitation_cache = None
-        self.excitation_reasons = ["", "", "", ""]
+        self._excitation_why: list = ["", "", "", ""]
         self._cov_unit = None
         self._slip_support = None
         self._capped = None
@@ -1141,7 +1141,7 @@ class LugreTrustRegionEstimator:
         # the old one.
         wheel_stats = self._wheel_stats(weights)
         best = 0.0
-        why = self.excitation_reasons = ["", "", "", ""]
+        why = self._excitation_why = ["", "", "", ""]
         fit_at_hi = self._fit_at_high_slip(speed)
         # A θ held at its bound is not where the data put it: its peak proves nothing.
         at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
@@ -1176,7 +1176,7 @@ class LugreTrustRegionEstimator:
                     # ... unless this stop's data have shown the peak already and the wheel now
                     # stays past it, using the grip the fit says is there (ABS holding a wheel
                     # on an ice plateau): the peak is still being used, not left behind.
-                    why[i] = f"past the peak ({lam_lo / float(wheel_lam[i]):.2f})"
+                    why[i] = ("past the peak ({:.2f})", lam_lo / float(wheel_lam[i]))
                     best = max(best, 1.0)
                     continue
                 why[i] = "no slip spread"
@@ -1193,7 +1193,7 @@ class LugreTrustRegionEstimator:
                 continue
             bending = (a + 2 * b * lam_hi) / secant
             if bending > 0.5:
-                why[i] = f"not bending ({bending:.2f})"
+                why[i] = ("not bending ({:.2f})", bending)
                 continue
             if mu_hi > o.max_peak_secant * lam_hi:
                 # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
@@ -1222,7 +1222,7 @@ class LugreTrustRegionEstimator:
             if float(wheel_lam[i]) >= 0.9 * MAX_MODEL_SLIP and fit_ratio < o.excitation_fit_ratio:  # (uncapped)
                 why[i] = "no peak"
                 continue  # no peak short of lock, and the data far below the fitted maximum
-            why[i] = f"proximity {proximity:.2f}"
+            why[i] = ("proximity {:.2f}", proximity)
             best = max(best, proximity)
         if best < o.excitation_slip_ratio:
             return 0.0
@@ -1262,6 +1262,12 @@ class LugreTrustRegionEstimator:
         slip = np.asarray(slip, dtype=float)
         value, _ = mu_and_jacobian_theta(slip, np.full_like(slip, speed_mps), np.full_like(slip, theta), p, ("theta",))
         return value
+
+    @property
+    def excitation_reasons(self) -> list[str]:
+        """Why each wheel counts as excited or not at the last excitation check (for diagnosis:
+        formatted when asked for, not on every check)."""
+        return [why if isinstance(why, str) else why[0].format(why[1]) for why in self._excitation_why]
 
     @property
     def parameters(self) -> dict[str, float]:

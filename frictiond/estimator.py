@@ -387,7 +387,8 @@ class LugreTrustRegionEstimator:
         self._scale = np.array([1.0] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, max(o.prior_sigma2, 1e-3)])
         self._lb = np.array([math.log(o.theta_min)] * N_WHEELS + [o.sigma0_min, o.v_s_min, o.sigma2_min]) / self._scale
         self._ub = np.array([math.log(o.theta_max)] * N_WHEELS + [o.sigma0_max, o.v_s_max, o.sigma2_max]) / self._scale
-        self._theta_bounds = list(zip(self._lb[:N_WHEELS].tolist(), self._ub[:N_WHEELS].tolist()))
+        self._lb_list, self._ub_list = self._lb.tolist(), self._ub.tolist()
+        self._theta_bounds = list(zip(self._lb_list[:N_WHEELS], self._ub_list[:N_WHEELS]))
         self._prior_std = np.array([o.prior_std_log_theta] * N_WHEELS + [o.prior_std_sigma0, o.prior_std_v_s,
                                                                          o.prior_std_sigma2]) / self._scale
         self._base = LugreParams(mu_c=o.mu_c, mu_s=o.mu_s, alpha=o.alpha, patch_length=o.patch_length)
@@ -904,13 +905,16 @@ class LugreTrustRegionEstimator:
             # Parameters held at a bound are fixed there for the covariance: the unconstrained
             # Gauss–Newton covariance would count spread into the infeasible side. Like the
             # excitation, it changes slowly: refreshed every few fits.
-            span = self._ub - self._lb
-            free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
             if self.core is not None:
+                # (the same test in floats: seven numbers do not need numpy's per-call cost)
+                free_list = [v - lb > 1e-3 * (ub - lb) and ub - v > 1e-3 * (ub - lb)
+                             for v, lb, ub in zip(x.tolist(), self._lb_list, self._ub_list)]
                 cov = np.empty((len(x), len(x)))
-                if not self.core.inverse_free(normal, free.tolist(), cov):
+                if not self.core.inverse_free(normal, free_list, cov):
                     cov[:] = np.inf
             else:
+                span = self._ub - self._lb
+                free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
                 cov = np.zeros((len(x), len(x)))
                 try:
                     cov[np.ix_(free, free)] = np.linalg.inv(normal[np.ix_(free, free)])

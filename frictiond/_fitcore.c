@@ -1394,6 +1394,155 @@ out:
     return result;
 }
 
+/* ------------------------------------------------------------ the excitation's verdicts */
+
+/* Python's max(a, b) and min(a, b) for floats: a unless b compares beyond it (NaN stays where it is). */
+static inline double py_max2(double a, double b) { return b > a ? b : a; }
+static inline double py_min2(double a, double b) { return b < a ? b : a; }
+
+/* The constants of excitation_verdicts, in the order of estimator._excitation_constants. */
+enum {
+    X_MIN_WHEEL_SAMPLES, X_SLIP_RATE, X_RELATIVE_SLIP_RATE, X_MIN_SLIP, X_MIN_UTILISATION, X_MAX_PEAK_SECANT,
+    X_SLIP_RATIO, X_FIT_RATIO, X_MU_RATIO, X_MAX_MODEL_SLIP, X_COUNT
+};
+
+/* The reasons, in the order of estimator._EXCITATION_WHY (the formatted ones as (format, value)). */
+enum {
+    W_BOUND, W_FEW, W_NO_RUNAWAY, W_PAST_PEAK, W_NO_SPREAD, W_DEGENERATE, W_NEGATIVE_SECANT, W_NOT_BENDING,
+    W_STEEP, W_LOW_UTILISATION, W_NO_PEAK, W_PROXIMITY, W_COUNT
+};
+
+/* A reason for the list: the plain string, or (format, value) for a formatted one. */
+static PyObject *reason(PyObject *whys, int which, int formatted, double value)
+{
+    PyObject *w = PyTuple_GET_ITEM(whys, which);
+    return formatted ? Py_BuildValue("(Od)", w, value) : Py_NewRef(w);
+}
+
+/* excitation_verdicts(wheel_stats, at_bound, peak_seen, wheel_mu, wheel_lam, fit_at_hi, capped, constants, whys)
+ * -> (excitation, peak_seen, reasons) | None: LugreTrustRegionEstimator._excitation's loop over the
+ * wheels, line by line (Python's max/min on NaN kept); None when a wheel's peak μ or slip is 0
+ * or a ratio setting would divide by zero (the Python loop then does, and decides how that ends). */
+static PyObject *py_excitation_verdicts(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_stats, *o_bound, *o_mu, *o_lam, *o_fit, *o_capped, *o_k, *whys;
+    int peak_seen;
+    if (!PyArg_ParseTuple(args, "O!OpOOOOO!O!:excitation_verdicts", &PyTuple_Type, &o_stats, &o_bound, &peak_seen,
+                          &o_mu, &o_lam, &o_fit, &o_capped, &PyTuple_Type, &o_k, &PyTuple_Type, &whys))
+        return NULL;
+    if (PyTuple_GET_SIZE(o_stats) != NW || PyTuple_GET_SIZE(o_k) != X_COUNT || PyTuple_GET_SIZE(whys) != W_COUNT) {
+        PyErr_SetString(PyExc_ValueError, "excitation_verdicts: four wheels' stats, the constants and the reasons");
+        return NULL;
+    }
+    double k[X_COUNT], mu[MAX_POINTS], lam[MAX_POINTS], fit[MAX_POINTS];
+    for (int i = 0; i < X_COUNT; i++)
+        if ((k[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(o_k, i))) == -1.0 && PyErr_Occurred())
+            return NULL;
+    if (floats(o_mu, mu, "wheel_mu") != NW || floats(o_lam, lam, "wheel_lam") != NW
+        || floats(o_fit, fit, "fit_at_hi") != NW) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "excitation_verdicts: four wheels");
+        return NULL;
+    }
+    int bound[NW], capped[NW];
+    for (int i = 0; i < NW; i++) {
+        PyObject *b = PySequence_GetItem(o_bound, i), *c = o_capped == Py_None ? NULL : PySequence_GetItem(o_capped, i);
+        bound[i] = b ? PyObject_IsTrue(b) : -1;
+        capped[i] = o_capped == Py_None ? 0 : c ? PyObject_IsTrue(c) : -1;
+        Py_XDECREF(b);
+        Py_XDECREF(c);
+        if (bound[i] < 0 || capped[i] < 0)
+            return NULL;
+        if (mu[i] == 0.0 || lam[i] == 0.0 || k[X_FIT_RATIO] == 1.0 || k[X_MU_RATIO] == 0.0)
+            Py_RETURN_NONE;
+    }
+    double st[NW][N_STATS];
+    for (int i = 0; i < NW; i++)
+        if (floats(PyTuple_GET_ITEM(o_stats, i), st[i], "wheel_stats") != N_STATS) {
+            if (!PyErr_Occurred())
+                PyErr_SetString(PyExc_ValueError, "excitation_verdicts: 12 statistics a wheel");
+            return NULL;
+        }
+    PyObject *why = PyList_New(NW);
+    if (!why)
+        return NULL;
+    double best = 0.0;
+    const double slip_ratio = k[X_SLIP_RATIO];
+    for (int i = 0; i < NW; i++) {
+        PyObject *r;
+        const double n = st[i][0], lam_lo = st[i][3], lam_hi = st[i][4], mu_hi = st[i][5], runaway_rate = st[i][6];
+        const double s2 = st[i][7], s3 = st[i][8], s4 = st[i][9], y1 = st[i][10], y2 = st[i][11];
+        if (bound[i]) {
+            r = reason(whys, W_BOUND, 0, 0);
+            goto next;
+        }
+        if (n < k[X_MIN_WHEEL_SAMPLES]) {
+            r = reason(whys, W_FEW, 0, 0);
+            goto next;
+        }
+        if (!peak_seen) {
+            const double needed = py_min2(k[X_SLIP_RATE], k[X_RELATIVE_SLIP_RATE] * lam_hi);
+            if (!(runaway_rate >= needed)) {
+                r = reason(whys, W_NO_RUNAWAY, 0, 0);
+                goto next;
+            }
+        }
+        if (lam_hi < k[X_MIN_SLIP] || (lam_hi - lam_lo) < 0.3 * lam_hi) {
+            if (peak_seen && lam_hi >= k[X_MIN_SLIP] && lam_lo >= lam[i] && mu_hi >= k[X_MIN_UTILISATION] * mu[i]) {
+                r = reason(whys, W_PAST_PEAK, 1, lam_lo / lam[i]);
+                best = py_max2(best, 1.0);
+                goto next;
+            }
+            r = reason(whys, W_NO_SPREAD, 0, 0);
+            goto next;
+        }
+        const double det = s2 * s4 - s3 * s3;
+        if (det <= 1e-18 * py_max2(s2 * s4, 1e-300)) {
+            r = reason(whys, W_DEGENERATE, 0, 0);
+            goto next;
+        }
+        const double a = (y1 * s4 - y2 * s3) / det, b = (s2 * y2 - s3 * y1) / det;
+        const double secant = a + b * lam_hi;
+        if (secant <= 0) {
+            r = reason(whys, W_NEGATIVE_SECANT, 0, 0);
+            goto next;
+        }
+        const double bending = (a + 2 * b * lam_hi) / secant;
+        if (bending > 0.5) {
+            r = reason(whys, W_NOT_BENDING, 1, bending);
+            goto next;
+        }
+        if (mu_hi > k[X_MAX_PEAK_SECANT] * lam_hi) {
+            r = reason(whys, W_STEEP, 0, 0);
+            goto next;
+        }
+        const double fit_ratio = fit[i] / py_max2(mu[i], 1e-6);
+        const double by_plateau = slip_ratio + (fit_ratio - k[X_FIT_RATIO]) / (1.0 - k[X_FIT_RATIO]) * (1.0 - slip_ratio);
+        const double proximity = capped[i] ? by_plateau
+            : py_max2(py_max2(lam_hi / lam[i], mu_hi / mu[i] * slip_ratio / k[X_MU_RATIO]), by_plateau);
+        if (mu_hi < k[X_MIN_UTILISATION] * mu[i]) {
+            r = reason(whys, W_LOW_UTILISATION, 0, 0);
+            goto next;
+        }
+        if (lam[i] >= 0.9 * k[X_MAX_MODEL_SLIP] && fit_ratio < k[X_FIT_RATIO]) {
+            r = reason(whys, W_NO_PEAK, 0, 0);
+            goto next;
+        }
+        r = reason(whys, W_PROXIMITY, 1, proximity);
+        best = py_max2(best, proximity);
+    next:
+        if (!r) {
+            Py_DECREF(why);
+            return NULL;
+        }
+        PyList_SET_ITEM(why, i, r);
+    }
+    if (best < slip_ratio)
+        return Py_BuildValue("(dON)", 0.0, peak_seen ? Py_True : Py_False, why);
+    return Py_BuildValue("(dON)", py_min2(1.0, (best - slip_ratio) / 0.15 + 0.5), Py_True, why);
+}
+
 /* search_left(times, lo, hi, t) -> int: numpy's `times[lo:hi].searchsorted(t, side="left") + lo`
  * (the first k with times[k] >= t; NaN sorts last), on a float64 array without the slice. */
 static PyObject *py_search_left(PyObject *self, PyObject *args)
@@ -1465,6 +1614,9 @@ static PyMethodDef methods[] = {
     {"drift_reference", py_drift_reference, METH_VARARGS,
      "drift_reference(history, since, span) -> float | None: the median mu_max of the (time, mu_max) pairs\n"
      "from the first at or after since to span after it; None when one of them is NaN"},
+    {"excitation_verdicts", py_excitation_verdicts, METH_VARARGS,
+     "excitation_verdicts(wheel_stats, at_bound, peak_seen, wheel_mu, wheel_lam, fit_at_hi, capped, constants,\n"
+     "whys) -> (excitation, peak_seen, reasons) | None: the excitation's verdicts over the four wheels"},
     {"search_left", py_search_left, METH_VARARGS,
      "search_left(times, lo, hi, t) -> int: times[lo:hi].searchsorted(t, side='left') + lo"},
     {NULL, NULL, 0, NULL},

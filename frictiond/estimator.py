@@ -249,6 +249,11 @@ def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: l
 
 _WHEEL_COLUMN = np.arange(N_WHEELS)[:, None]
 _WHEEL_STD_KEYS = tuple(f"wheel_std_{i}" for i in range(N_WHEELS))
+# The excitation's reasons as `_fitcore.excitation_verdicts` gives them (the formatted ones are
+# (format, value) until read), in the order of its W_ constants: those of `_excitation`'s loop.
+_EXCITATION_WHY = ("θ at its bound", "few samples", "slip not running away", "past the peak ({:.2f})",
+                   "no slip spread", "degenerate", "negative secant", "not bending ({:.2f})", "steep secant",
+                   "low utilisation", "no peak", "proximity {:.2f}")
 
 
 class _Window:
@@ -379,6 +384,11 @@ class LugreTrustRegionEstimator:
         self._runaway_lag = max(2, round(0.05 / sample_period_s))
         # The forgetting weight of a sample `excitation_window_s` old: newer ones are "recent".
         self._recent_threshold = math.exp(-o.excitation_window_s / o.forgetting_time_constant)
+        # `_fitcore.excitation_verdicts`' settings, in the order of its X_ constants.
+        self._excitation_constants = tuple(float(v) for v in (
+            self._min_wheel_samples, o.excitation_slip_rate, o.excitation_relative_slip_rate, o.excitation_min_slip,
+            o.min_utilisation, o.max_peak_secant, o.excitation_slip_ratio, o.excitation_fit_ratio,
+            o.excitation_mu_ratio, MAX_MODEL_SLIP))
         # Room for a whole window at twice the expected rate, four wheels a sample (a window
         # that outgrows it loses its oldest quarter); bounded so that a window_s of hours does not
         # preallocate gigabytes.
@@ -1150,6 +1160,14 @@ class LugreTrustRegionEstimator:
         # A θ held at its bound is not where the data put it: its peak proves nothing.
         at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
                     zip(self._x[:N_WHEELS].tolist(), self._theta_bounds)]
+        if self.core is not None:
+            # The loop below, compiled (`_fitcore.excitation_verdicts`, the same reasons).
+            verdicts = self.core.excitation_verdicts(wheel_stats, at_bound, self._peak_seen, wheel_mu, wheel_lam,
+                                                     fit_at_hi, self._capped, self._excitation_constants,
+                                                     _EXCITATION_WHY)
+            if verdicts is not None:
+                excitation, self._peak_seen, self._excitation_why = verdicts
+                return excitation
         for i in range(N_WHEELS):
             if at_bound[i]:
                 why[i] = "θ at its bound"

@@ -482,3 +482,54 @@ def test_drift_reference_is_the_confidence_loop():
         core.drift_reference(deque([(0.0, 0.5)]), 1.0, 1.0)
     with pytest.raises(TypeError, match="pairs"):
         core.drift_reference([(0.0, 0.5, 1.0)], 0.0, 1.0)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+def test_excitation_verdicts_are_the_loop_on_every_branch(monkeypatch):
+    """`_excitation` with its statistics given: the compiled verdicts against the Python loop,
+    over random wheels that reach each of its reasons (and NaN where the data can hold one)."""
+    est = LugreTrustRegionEstimator()
+    rng = np.random.default_rng(41)
+
+    def random_wheel():
+        n = int(rng.integers(0, 30))
+        lam = np.abs(rng.normal(rng.uniform(0.005, 0.2), rng.choice([0.0, 0.001, 0.03]), max(n, 1)))
+        slope = float(rng.choice([rng.uniform(2.0, 12.0), rng.uniform(30.0, 60.0)]))   # (the latter: too steep)
+        curve = float(rng.choice([-0.5, 0.0, 0.2, 0.5])) * slope / float(lam.max())   # the wrong way .. bent over
+        mu = np.maximum(slope * lam - curve * lam * lam, 0.0) + rng.normal(0, 0.01, lam.size)
+        if rng.random() < 0.05:
+            mu = -mu    # (a drive torque read as braking: the secant goes negative)
+        lam2 = lam * lam
+        stats = [float(n), 0.0, 0.0, float(lam.min()), float(lam.max()), float(mu.max()),
+                 float(rng.choice([rng.uniform(-1, 5), math.nan])), float(lam @ lam), float(lam @ lam2),
+                 float(lam2 @ lam2), float(lam @ mu), float(lam2 @ mu)]
+        if rng.random() < 0.05:
+            stats[7:12] = [1.0, 1.0, 1.0, 0.5, 0.5]   # exactly degenerate
+        return tuple(stats)
+
+    seen = set()
+    for _ in range(3000):
+        stats = tuple(random_wheel() for _ in range(4))
+        wheel_mu = [float(v) for v in rng.choice([rng.uniform(0.05, 1.3), 3e-6], 4, p=[0.9, 0.1])]   # (and ~0)
+        wheel_lam = [float(v) for v in rng.choice([rng.uniform(0.01, 0.25), 0.95], 4)]
+        fit_at_hi = [float(v) for v in rng.uniform(0.0, 1.3, 4)]
+        x = est._x.copy()
+        x[:4] = [est._lb[0] if rng.random() < 0.05 else float(rng.uniform(est._lb[0], est._ub[0])) for _ in range(4)]
+        capped = None if rng.random() < 0.5 else tuple(bool(b) for b in rng.random(4) < 0.3)
+        peak_seen = bool(rng.random() < 0.5)
+        outcome = []
+        for compiled in (True, False):
+            monkeypatch.setattr(est, "core", core if compiled else None)
+            monkeypatch.setattr(est, "_wheel_stats", lambda weights: stats)
+            monkeypatch.setattr(est, "_fit_at_high_slip", lambda speed: fit_at_hi)
+            est._x, est._capped, est._peak_seen = x, capped, peak_seen
+            value = est._excitation(None, wheel_mu, wheel_lam, 10.0)
+            outcome.append((value, est._peak_seen, est.excitation_reasons))
+        assert outcome[0] == outcome[1]
+        seen.update(r.split(" (")[0].split(" 0")[0].split(" 1")[0].split(" 2")[0] for r in outcome[0][2])
+    assert {"θ at its bound", "few samples", "slip not running away", "past the peak", "no slip spread", "degenerate",
+            "negative secant", "not bending", "steep secant", "low utilisation", "no peak"} <= seen, seen
+    assert any(r.startswith("proximity") for r in seen)
+    # A peak at zero slip would divide by zero: left to the Python loop.
+    assert core.excitation_verdicts(stats, [False] * 4, True, wheel_mu, [0.0] * 4, fit_at_hi, None,
+                                    est._excitation_constants, estimator_module._EXCITATION_WHY) is None

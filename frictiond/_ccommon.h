@@ -128,6 +128,11 @@ static inline double sum_of(const double *a, Py_ssize_t n)
     return s;
 }
 
+/* Python's max(a, b) and min(a, b) for floats: a unless b compares beyond it (so a NaN stays
+ * where it is, as in the Python code the compiled modules mirror). */
+static inline double py_max(double a, double b) { return b > a ? b : a; }
+static inline double py_min(double a, double b) { return b < a ? b : a; }
+
 /* Σ a_k·b_k, in order. */
 static inline double dot_of(const double *a, const double *b, Py_ssize_t n)
 {

@@ -743,6 +743,35 @@ static double quantile_sorted(const double *v, Py_ssize_t n, double q)
  * slips and μ of order k_lo, k_hi (k = n // 10 from each end, as the excitation test takes
  * them); the fastest slip run-away over `lag` samples whose force did not follow; the sums
  * of the through-origin quadratic fit. estimator._wheel_stats_numpy is the reference. */
+/* numpy's float "less than": NaN is the largest. */
+static inline int npy_less(double a, double b) { return a < b || (b != b && a == a); }
+
+/* numpy's a[lo:hi].searchsorted(t, side="left") + lo: the first k with a[k] >= t (NaN sorts last). */
+static Py_ssize_t search_left(const double *a, Py_ssize_t lo, Py_ssize_t hi, double t)
+{
+    while (lo < hi) {
+        const Py_ssize_t mid = lo + (hi - lo) / 2;
+        if (npy_less(a[mid], t))
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+/* numpy's a[lo:hi].searchsorted(t, side="right") + lo: the first k with a[k] > t. */
+static Py_ssize_t search_right(const double *a, Py_ssize_t lo, Py_ssize_t hi, double t)
+{
+    while (lo < hi) {
+        const Py_ssize_t mid = lo + (hi - lo) / 2;
+        if (npy_less(t, a[mid]))
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    return lo;
+}
+
 /* estimator._wheel_stats_numpy over m samples: a tuple of four 12-tuples (NULL with an exception). */
 static PyObject *wheel_stats_of(const double *slip, const double *mu, const Py_ssize_t *wheel, const double *times,
                                 Py_ssize_t m, int lag, double elasticity)
@@ -882,15 +911,8 @@ static PyObject *py_recent_wheel_stats(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "recent_wheel_stats: lo, hi outside the window");
         goto out;
     }
-    const double *w = (const double *)b[4].view.buf + 2 * cap;
-    Py_ssize_t k = lo, end = hi;   /* side="right": the first weight beyond the threshold */
-    while (k < end) {
-        const Py_ssize_t mid = k + (end - k) / 2;
-        if (threshold < w[mid] || (w[mid] != w[mid] && threshold == threshold))
-            end = mid;
-        else
-            k = mid + 1;
-    }
+    /* the first weight beyond the threshold (fit_window's weights: scratch row 2) */
+    const Py_ssize_t k = search_right((const double *)b[4].view.buf + 2 * cap, lo, hi, threshold);
     result = wheel_stats_of((const double *)b[0].view.buf + k, (const double *)b[1].view.buf + k,
                             (const Py_ssize_t *)b[2].view.buf + k, (const double *)b[3].view.buf + k, hi - k, lag,
                             elasticity);
@@ -901,7 +923,6 @@ out:
 
 /* ------------------------------------------------------------- the reported peak */
 
-static double py_max0(double a) { return 0.0 > a ? 0.0 : a; }   /* Python's max(a, 0.0): NaN stays */
 
 /* The reported numbers from the wheels' peaks (LugreTrustRegionEstimator._report_numbers_numpy):
  * each peak held within the slips the data support, the load-weighted μ_max, and by the delta
@@ -988,9 +1009,9 @@ static PyObject *py_peak_report(PyObject *self, PyObject *args)
         for (int a = 0; a < NP; a++)
             for (int b = 0; b < NP; b++)
                 w += G[i][a] * cov[a * NP + b] * variance_factor * G[i][b];
-        wheel_std[i] = w == w ? sqrt(py_max0(w)) : w;
+        wheel_std[i] = w == w ? sqrt(py_max(w, 0.0)) : w;
     }
-    const double mu_std = sqrt(py_max0(var));
+    const double mu_std = sqrt(py_max(var, 0.0));
     PyObject *t_mu = tuple_of(wheel_mu, NW), *t_lam = tuple_of(wheel_lam, NW), *t_std = tuple_of(wheel_std, NW);
     PyObject *t_capped = PyTuple_New(NW);
     if (!t_mu || !t_lam || !t_std || !t_capped) {
@@ -1042,20 +1063,6 @@ static void residual_stats(const double *r, const double *w, Py_ssize_t first, P
     }
     *rms = sqrt(dev2 / n);
     *same_sign = fabs(signs / n);
-}
-
-/* numpy's a[lo:hi].searchsorted(t, side="left") + lo: the first k with a[k] >= t (NaN sorts last). */
-static Py_ssize_t search_left(const double *a, Py_ssize_t lo, Py_ssize_t hi, double t)
-{
-    while (lo < hi) {
-        const Py_ssize_t mid = lo + (hi - lo) / 2;
-        const double x = a[mid];
-        if (x < t || (t != t && x == x))   /* numpy's float "less than": NaN is the largest */
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    return lo;
 }
 
 /* Forgetting weights exp(min(t − now, 0)/τ) and the rows' weights √w/σ, into w_out, sw_out;
@@ -1312,9 +1319,7 @@ static PyObject *py_fit_window(PyObject *self, PyObject *args)
     const Outcome o = solve(&p, b[8].view.buf, b[9].view.buf, b[10].view.buf, radius, max_iterations, ftol, xtol,
                             gtol, max_rejections, predicted_ftol, b[14].view.buf, b[15].view.buf, r_data, r_work,
                             (double *)b[7].view.buf + ROW * lo, b[16].view.buf, cached_n, rows_trial);
-    double rr = 0.0;
-    for (Py_ssize_t j = 0; j < m; j++)
-        rr += r_data[j] * r_data[j];
+    const double rr = dot_of(r_data, r_data, m);
     const Py_ssize_t first = search_left(t, 0, m, jump_t);
     double mean = 0.0, rms = 0.0, same_sign = 0.0;
     if (first < m)
@@ -1396,9 +1401,6 @@ out:
 
 /* ------------------------------------------------------------ the excitation's verdicts */
 
-/* Python's max(a, b) and min(a, b) for floats: a unless b compares beyond it (NaN stays where it is). */
-static inline double py_max2(double a, double b) { return b > a ? b : a; }
-static inline double py_min2(double a, double b) { return b < a ? b : a; }
 
 /* The constants of excitation_verdicts, in the order of estimator._excitation_constants. */
 enum {
@@ -1482,7 +1484,7 @@ static PyObject *py_excitation_verdicts(PyObject *self, PyObject *args)
             goto next;
         }
         if (!peak_seen) {
-            const double needed = py_min2(k[X_SLIP_RATE], k[X_RELATIVE_SLIP_RATE] * lam_hi);
+            const double needed = py_min(k[X_SLIP_RATE], k[X_RELATIVE_SLIP_RATE] * lam_hi);
             if (!(runaway_rate >= needed)) {
                 r = reason(whys, W_NO_RUNAWAY, 0, 0);
                 goto next;
@@ -1491,14 +1493,14 @@ static PyObject *py_excitation_verdicts(PyObject *self, PyObject *args)
         if (lam_hi < k[X_MIN_SLIP] || (lam_hi - lam_lo) < 0.3 * lam_hi) {
             if (peak_seen && lam_hi >= k[X_MIN_SLIP] && lam_lo >= lam[i] && mu_hi >= k[X_MIN_UTILISATION] * mu[i]) {
                 r = reason(whys, W_PAST_PEAK, 1, lam_lo / lam[i]);
-                best = py_max2(best, 1.0);
+                best = py_max(best, 1.0);
                 goto next;
             }
             r = reason(whys, W_NO_SPREAD, 0, 0);
             goto next;
         }
         const double det = s2 * s4 - s3 * s3;
-        if (det <= 1e-18 * py_max2(s2 * s4, 1e-300)) {
+        if (det <= 1e-18 * py_max(s2 * s4, 1e-300)) {
             r = reason(whys, W_DEGENERATE, 0, 0);
             goto next;
         }
@@ -1517,10 +1519,10 @@ static PyObject *py_excitation_verdicts(PyObject *self, PyObject *args)
             r = reason(whys, W_STEEP, 0, 0);
             goto next;
         }
-        const double fit_ratio = fit[i] / py_max2(mu[i], 1e-6);
+        const double fit_ratio = fit[i] / py_max(mu[i], 1e-6);
         const double by_plateau = slip_ratio + (fit_ratio - k[X_FIT_RATIO]) / (1.0 - k[X_FIT_RATIO]) * (1.0 - slip_ratio);
         const double proximity = capped[i] ? by_plateau
-            : py_max2(py_max2(lam_hi / lam[i], mu_hi / mu[i] * slip_ratio / k[X_MU_RATIO]), by_plateau);
+            : py_max(py_max(lam_hi / lam[i], mu_hi / mu[i] * slip_ratio / k[X_MU_RATIO]), by_plateau);
         if (mu_hi < k[X_MIN_UTILISATION] * mu[i]) {
             r = reason(whys, W_LOW_UTILISATION, 0, 0);
             goto next;
@@ -1530,7 +1532,7 @@ static PyObject *py_excitation_verdicts(PyObject *self, PyObject *args)
             goto next;
         }
         r = reason(whys, W_PROXIMITY, 1, proximity);
-        best = py_max2(best, proximity);
+        best = py_max(best, proximity);
     next:
         if (!r) {
             Py_DECREF(why);
@@ -1540,7 +1542,7 @@ static PyObject *py_excitation_verdicts(PyObject *self, PyObject *args)
     }
     if (best < slip_ratio)
         return Py_BuildValue("(dON)", 0.0, peak_seen ? Py_True : Py_False, why);
-    return Py_BuildValue("(dON)", py_min2(1.0, (best - slip_ratio) / 0.15 + 0.5), Py_True, why);
+    return Py_BuildValue("(dON)", py_min(1.0, (best - slip_ratio) / 0.15 + 0.5), Py_True, why);
 }
 
 /* search_left(times, lo, hi, t) -> int: numpy's `times[lo:hi].searchsorted(t, side="left") + lo`

@@ -422,7 +422,7 @@ static PyObject *py_push_values(PyObject *self, PyObject *args)
  * Python's min/max on NaN (the first argument is kept unless the second compares beyond it).
  */
 
-/* The per-sample constants, in the order of frontend._PHYSICS_CONSTANTS. */
+/* The per-sample constants, in the order of FrontEnd._physics_constants. */
 enum {
     K_STUCK_FRAMES, K_PUSHOUT, K_MIN_BRAKE_PRESSURE, K_MIN_SPEED, K_DEAD_RATIO, K_DEAD_S, K_DEAD_UNBRAKED_S,
     K_MAX_GAP, K_UNEXPLAINED_DECEL, K_RADIUS, K_GAIN_FREE, K_GAIN_UP, K_GAIN_DOWN, K_MIN_BRAKED_SLIP,
@@ -440,10 +440,6 @@ enum {
 #define BRAKE_MODEL_MARGIN 1.25
 #define BRAKE_MODEL_WINDOW 0.2
 #define GRAVITY 9.80665
-
-/* Python's max(a, b) and min(a, b) for floats: a unless b compares beyond it. */
-static inline double py_max(double a, double b) { return b > a ? b : a; }
-static inline double py_min(double a, double b) { return b < a ? b : a; }
 
 /* The FrontEnd attributes sample_physics reads and writes. */
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
@@ -502,7 +498,7 @@ static int get_bool_attr(PyObject *obj, PyObject *name, int *out)
     return *out < 0 ? -1 : 0;
 }
 
-/* A 4-list attribute (the per-wheel state lists), borrowed from the object's reference. */
+/* A 4-list attribute (the per-wheel state lists): a new reference, or NULL with an exception. */
 static PyObject *list_attr(PyObject *obj, PyObject *name)
 {
     PyObject *v = PyObject_GetAttr(obj, name);
@@ -686,7 +682,7 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
         *from_ref = 1;
         return ref;
     }
-    const double mean = (((wl[0] + wl[1]) + wl[2]) + wl[3]) / 4.0;
+    const double mean = sum_of(wl, NW) / 4.0;
     double v = s->speed_est;
     if (!s->has_speed_est || dt <= 0.0 || dt > k[K_MAX_GAP]) {
         v = fastest;
@@ -713,13 +709,12 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
                               const double *brake, const double *drive)
 {
     const double decel = -accel_long;
-    const double total_brake = ((brake[0] + brake[1]) + brake[2]) + brake[3];
+    const double total_brake = sum_of(brake, NW);
     if (decel < k[K_GAIN_MIN_DECEL] || total_brake < 1.0)
         return;
     const double drag = k[K_ROLLING] * speed + k[K_DRAG] * speed * speed;
     const double total_force = k[K_MASS] * decel - drag;
-    const double other = (((inertia[0] + inertia[1]) + inertia[2]) + inertia[3])
-                         - (((drive[0] + drive[1]) + drive[2]) + drive[3]);
+    const double other = sum_of(inertia, NW) - sum_of(drive, NW);
     const double lim = k[K_GAIN_LIMITS];
     double ratio = (total_force * k[K_RADIUS] - other) / total_brake;
     if (!isfinite(ratio))
@@ -882,7 +877,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *args)
     const double speed = update_speed(&s, k, t_c, wl, accel_long, !free_rolling, has_ref, ref, ref_fresh, &from_ref);
     if (free_rolling) {
         /* FrontEnd._learn_accel_bias */
-        const double wheel_accel = radius * ((((omega_dot[0] + omega_dot[1]) + omega_dot[2]) + omega_dot[3]) / NW);
+        const double wheel_accel = radius * (sum_of(omega_dot, NW) / NW);
         double alpha = py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_BIAS_TAU], 1e-3));
         const double error = a_raw - wheel_accel;
         if (fabs(error) < 2.0) {

@@ -735,7 +735,7 @@ class OutputCodec:
         # values cannot change the page: the estimate's when it has no multiplexer, each wheel's
         # when WheelIndex alone chooses it. Any other page is looked up per frame (`_encode`).
         self._estimate_spec = self._fixed_spec(self.estimate_id, {})
-        self._wheel_specs = [self._fixed_spec(self.wheel_id, {"WheelIndex": i}) for i in range(len(WHEELS))]
+        self._wheel_specs = tuple(self._fixed_spec(self.wheel_id, {"WheelIndex": i}) for i in range(len(WHEELS)))
 
     def _fixed_spec(self, frame_id: int, chosen: dict[str, int]) -> tuple | None:
         """The compiled field table of the page that the multiplexer values `chosen` select,
@@ -782,7 +782,7 @@ class OutputCodec:
         if self.core is not None and None not in self._wheel_specs:
             # The four frames in one compiled call (each as `_encode` would make it).
             counter = self._counters[self.wheel_id]
-            payloads = self.core.encode_wheels(tuple(self._wheel_specs), self.wheel_message.length, self.wheel_id,
+            payloads = self.core.encode_wheels(self._wheel_specs, self.wheel_message.length, self.wheel_id,
                                                counter, self._counter_bit[self.wheel_id], slips, mus_used, mus_max,
                                                loads, self._extra_values[self.wheel_id])
             if payloads is not None:

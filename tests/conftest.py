@@ -29,3 +29,15 @@ def write_config(tmp_path: Path, data, name: str = "cfg.yaml") -> Path:
     path = tmp_path / name
     path.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
     return path
+
+
+def edited_dbc(tmp_path: Path, *edits: tuple[str, str]) -> Path:
+    """The project's DBC with each (old, new) edit made at old's first place (old must be there),
+    written under tmp_path: a vehicle's variant of the output messages."""
+    text = (REPO / "dbc" / "frictiond.dbc").read_text()
+    for old, new in edits:
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    path = tmp_path / "out.dbc"
+    path.write_text(text)
+    return path

@@ -12,7 +12,7 @@ from frictiond.e2e import E2EChecker, crc8_sae_j1850, e2e_crc
 from frictiond.frames import Frame
 from frictiond.samples import FrictionEstimate, PhysicalSample, Status
 
-from .conftest import REPO, write_config
+from .conftest import REPO, edited_dbc, write_config
 
 DBC = REPO / "dbc" / "frictiond.dbc"
 
@@ -152,12 +152,9 @@ def test_e2e_checker_sees_corruption_and_loss(default_config):
 
 def test_output_dbc_with_spare_signals_sends_them_idle(tmp_path):
     # A vehicle's own copy of the output messages may carry signals the contract does not name.
-    text = DBC.read_text().replace(
+    path = edited_dbc(tmp_path, (
         ' SG_ Confidence : 54|8@1+ (0.005,0) [0|1] "" VEHICLE\n',
-        ' SG_ Confidence : 54|8@1+ (0.005,0) [0|1] "" VEHICLE\n SG_ Spare : 62|2@1+ (1,1) [1|3] "" VEHICLE\n')
-    assert "Spare" in text
-    path = tmp_path / "out.dbc"
-    path.write_text(text)
+        ' SG_ Confidence : 54|8@1+ (0.005,0) [0|1] "" VEHICLE\n SG_ Spare : 62|2@1+ (1,1) [1|3] "" VEHICLE\n'))
     out = OutputCodec(load_databases([path]))
     data = out.encode_estimate(FrictionEstimate(0.0, Status.VALID, 0.8, 0.1, 1.0, 0.9))
     decoded = out.decode_output(Frame(0.0, out.estimate_id, data))
@@ -171,11 +168,6 @@ def test_output_dbc_with_spare_signals_sends_them_idle(tmp_path):
     [("Crc : 0|8@1+", "Crc : 7|8@0+")],                                                       # big-endian CRC
 ])
 def test_output_dbc_whose_e2e_fields_cannot_be_written_is_refused(tmp_path, edits):
-    text = DBC.read_text()
-    for old, new in edits:
-        assert old in text
-        text = text.replace(old, new, 1)   # (the first: FRICTION_ESTIMATE's)
-    path = tmp_path / "out.dbc"
-    path.write_text(text)
+    path = edited_dbc(tmp_path, *edits)   # (each at its first place: FRICTION_ESTIMATE's)
     with pytest.raises(ConfigError, match="FRICTION_ESTIMATE needs Crc as 0"):
         OutputCodec(load_databases([path]))

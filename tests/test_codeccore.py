@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import cantools
 import numpy as np
@@ -16,7 +15,7 @@ from frictiond.e2e import protect
 from frictiond.frames import Frame
 from frictiond.samples import FrictionEstimate, PhysicalSample, Status
 
-from .conftest import REPO
+from .conftest import REPO, edited_dbc
 
 core = codec_module.compiled_codec
 needs_core = pytest.mark.skipif(core is None, reason="not built (test_the_compiled_codec_is_built fails instead)")
@@ -160,15 +159,11 @@ def test_protect_is_e2e_protect():
 @needs_core
 @pytest.mark.parametrize("wheel_spare", [False, True])
 def test_output_frames_are_the_same_on_both_paths(tmp_path, wheel_spare):
-    config = load_config(default_config_path())
-    dbc = Path(config.can.output_dbc)
+    dbc = load_config(default_config_path()).can.output_dbc
     if wheel_spare:   # (a vehicle's FRICTION_WHEEL with a signal beyond the contract's: sent idle)
-        text = dbc.read_text().replace(
+        dbc = edited_dbc(tmp_path, (
             ' SG_ NormalForce m0 : 52|12@1+ (5,0) [0|20475] "N" VEHICLE\n',
-            ' SG_ NormalForce m0 : 52|10@1+ (20,0) [0|20460] "N" VEHICLE\n SG_ Spare : 62|2@1+ (1,1) [1|3] "" VEHICLE\n')
-        assert "Spare" in text
-        dbc = tmp_path / "out.dbc"
-        dbc.write_text(text)
+            ' SG_ NormalForce m0 : 52|10@1+ (20,0) [0|20460] "N" VEHICLE\n SG_ Spare : 62|2@1+ (1,1) [1|3] "" VEHICLE\n'))
     compiled = OutputCodec(load_databases([dbc]))
     floats = OutputCodec(load_databases([dbc]))
     floats.core = None
@@ -254,13 +249,8 @@ def test_unpack_si_refuses_tables_that_do_not_agree():
 def test_a_multiplexed_estimate_message_is_packed_page_by_page(tmp_path):
     # A vehicle's output DBC may put signals of FRICTION_ESTIMATE on pages of a multiplexer:
     # each frame must be packed by the page its own values select.
-    text = (REPO / "dbc" / "frictiond.dbc").read_text()
-    for old, new in ((" SG_ EstimatorStatus : 12|4@1+", " SG_ EstimatorStatus M : 12|4@1+"),
-                     (" SG_ Confidence : 54|8@1+", " SG_ Confidence m3 : 54|8@1+")):
-        assert old in text
-        text = text.replace(old, new, 1)
-    path = tmp_path / "out.dbc"
-    path.write_text(text)
+    path = edited_dbc(tmp_path, (" SG_ EstimatorStatus : 12|4@1+", " SG_ EstimatorStatus M : 12|4@1+"),
+                      (" SG_ Confidence : 54|8@1+", " SG_ Confidence m3 : 54|8@1+"))
     compiled, floats = OutputCodec(load_databases([path])), OutputCodec(load_databases([path]))
     floats.core = None
     for status in Status:

@@ -26,7 +26,7 @@ from _common import default_config  # noqa: E402
 
 from frictiond.busio import LogWriter, read_log  # noqa: E402
 from frictiond.pipeline import Pipeline  # noqa: E402
-from frictiond.replay import replay_frames  # noqa: E402
+from frictiond.replay import replay_log  # noqa: E402
 from frictiond.sim_frames import (  # noqa: E402
     background_traffic,
     frames_per_second_for_load,
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
             floor_s = time.perf_counter() - t0
             pipeline = Pipeline(config)
             t0 = time.perf_counter()
-            summary = replay_frames(pipeline, read_log(log))
+            summary = replay_log(pipeline, log)
             replay_s = time.perf_counter() - t0
             floors.append(floor_s)
             replays.append(replay_s)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import errno
 import locale
 import logging
+import math
 import re
 import select
 import socket
@@ -113,55 +114,166 @@ def _candump_line_slow(temp: str) -> Frame:
 _CANDUMP_DATA_LINE = re.compile(r"\((-?[0-9]+\.[0-9]+)\) [!-~]+ ([0-9A-Fa-f]{1,8})#([0-9A-Fa-f]*)(?: [RrTt])?\n?")
 
 
-def _read_candump(path: Path) -> Iterator[Frame]:
-    """candump -L `.log` files without building a `can.Message` per line (the common lines).
+def _is_unrelated(frame: Frame, keep_ids: frozenset[int]) -> bool:
+    """A standard-ID data frame of an ID outside keep_ids: what `LogFrames` counts, not yields."""
+    return not (frame.is_extended or frame.is_error or frame.is_remote) and frame.can_id not in keep_ids
 
-    Classical data frames are parsed here; anything else (CAN FD, remote, error frames, odd
-    digits, other spacing) goes through the same steps as python-can's reader, so the frames are
-    identical to `message_to_frame` over `can.LogReader`.
+
+def _id_bitmap(ids: Iterable[int]) -> bytes:
+    """The IDs of up to three hex digits as `_logcore.candump_lines` takes them, a bit each."""
+    bits = bytearray(512)
+    for can_id in ids:
+        if 0 <= can_id < 0x1000:
+            bits[can_id >> 3] |= 1 << (can_id & 7)
+    return bytes(bits)
+
+
+def _candump_lines(text: str, keep_ids: frozenset[int] | None
+                   ) -> tuple[list[Frame | str], int, int, float, float]:
+    """The lines of a block of candump text, in order: the common line (a classical data frame) as
+    a Frame, blank lines left out, any other line as its str for `_candump_line_slow`.
+
+    With keep_ids, common standard-ID lines of other IDs are counted (`skipped`) instead.
+    Returns (items, slow_lines, skipped, lead_time, tail_time): lead_time/tail_time are the times
+    of the block's first/last frame line when that is a common line (NaN when it is a str item or
+    there is none), so a reader knows the log's span without building the skipped frames.
+    `_logcore.candump_lines` is this in C; this is its fallback and reference.
     """
-    encoding = locale.getpreferredencoding(False)
     match = _CANDUMP_DATA_LINE.fullmatch
-    fromhex = bytes.fromhex
     new_frame = tuple.__new__   # Frame(...) without its Python-level __new__ (half the cost)
-    parse = compiled_log.candump_frame if compiled_log is not None else None
-    with path.open("r", encoding=encoding) as fh:
-        for line in fh:
-            if parse is not None:
-                frame = parse(line, Frame)
-                if frame is not None:
-                    yield frame
+    items: list[Frame | str] = []
+    slow_lines = skipped = 0
+    lead_time = tail_time = math.nan
+    any_frame_line = False
+    lines = text.split("\n")
+    last = lines.pop()
+    for k, line in enumerate(lines + [last] if last else lines):
+        if k < len(lines):
+            line += "\n"
+        m = match(line)
+        if m is not None:
+            time_string, id_string, data = m.groups()
+            can_id = int(id_string, 16)
+            if not can_id & _CAN_ERR_FLAG and not len(data) & 1:
+                time_s = float(time_string)
+                if not any_frame_line:
+                    lead_time = time_s
+                any_frame_line = True
+                tail_time = time_s
+                extended = len(id_string) > 3
+                if keep_ids is not None and not extended and can_id not in keep_ids:
+                    skipped += 1
+                else:
+                    items.append(new_frame(Frame, (time_s, can_id, bytes.fromhex(data), extended, False, False)))
+                continue
+        if line.strip():
+            any_frame_line = True
+            tail_time = math.nan
+            slow_lines += 1
+            items.append(line)
+    return items, slow_lines, skipped, lead_time, tail_time
+
+
+_BLOCK_CHARS = 1 << 20   # candump text read and parsed a block at a time
+
+
+class LogFrames:
+    """The frames of a log file, in file order (timestamps may go backwards in spliced logs).
+
+    With keep_ids, standard-ID data frames of any other ID are counted in `skipped` and never
+    built: most of a loaded bus's log is other ECUs' traffic, which a consumer of a few IDs would
+    only drop. Every other frame (kept IDs, extended IDs, remote and error frames) is yielded.
+    After iteration `first_time_s`/`last_time_s` are the times of the file's first and last
+    frames, skipped or not. Iterating again reads the file again.
+    """
+
+    def __init__(self, path: str | Path, keep_ids: Iterable[int] | None = None) -> None:
+        self.path = Path(path)
+        self.keep_ids = None if keep_ids is None else frozenset(keep_ids)
+        self.skipped = 0
+        self.first_time_s: float | None = None
+        self.last_time_s: float | None = None
+
+    def __iter__(self) -> Iterator[Frame]:
+        path = self.path
+        _check_suffix(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such log file")
+        self.skipped = 0
+        self.first_time_s = self.last_time_s = None
+        if path.suffix.lower() == ".log":
+            yield from self._candump()
+            return
+        keep_ids = self.keep_ids
+        reader = can.LogReader(str(path))
+        try:
+            for msg in reader:
+                frame = message_to_frame(msg)
+                if self.first_time_s is None:
+                    self.first_time_s = frame.time_s
+                self.last_time_s = frame.time_s
+                if keep_ids is not None and _is_unrelated(frame, keep_ids):
+                    self.skipped += 1
                     continue
-            m = match(line)
-            if m is not None:
-                time_string, id_string, data = m.groups()
-                can_id = int(id_string, 16)
-                if not can_id & _CAN_ERR_FLAG and not len(data) & 1:
-                    yield new_frame(Frame, (float(time_string), can_id & 0x1FFFFFFF, fromhex(data),
-                                            len(id_string) > 3, False, False))
+                yield frame
+        finally:
+            stop = getattr(reader, "stop", None)
+            if stop is not None:
+                stop()
+
+    def _candump(self) -> Iterator[Frame]:
+        """candump -L `.log` files a block at a time, without a `can.Message` per line.
+
+        Common lines are parsed by `_candump_lines`; any other (CAN FD, remote, error frames, odd
+        digits, other spacing) goes through the same steps as python-can's reader, so the frames
+        are identical to `message_to_frame` over `can.LogReader`.
+        """
+        keep_ids = self.keep_ids
+        keep_bits = None if keep_ids is None else _id_bitmap(keep_ids)
+        compiled = compiled_log.candump_lines if compiled_log is not None else None
+        rest = ""
+        with self.path.open("r", encoding=locale.getpreferredencoding(False)) as fh:
+            while True:
+                block = fh.read(_BLOCK_CHARS)
+                text = rest + block
+                cut = text.rfind("\n") + 1 if block else len(text)
+                text, rest = text[:cut], text[cut:]
+                if text:
+                    parsed = compiled(text, Frame, keep_bits) if compiled is not None else None
+                    if parsed is None:
+                        parsed = _candump_lines(text, keep_ids)
+                    items, slow_lines, skipped, lead_time, tail_time = parsed
+                    self.skipped += skipped
+                    if self.first_time_s is None and lead_time == lead_time:
+                        self.first_time_s = lead_time
+                    if slow_lines:
+                        yield from self._with_slow_lines(items)
+                    else:
+                        yield from items
+                    if tail_time == tail_time:   # else the block's last frame line was a str item, or none
+                        self.last_time_s = tail_time
+                if not block:
+                    return
+
+    def _with_slow_lines(self, items: list[Frame | str]) -> Iterator[Frame]:
+        keep_ids = self.keep_ids
+        for item in items:
+            if type(item) is str:
+                frame = _candump_line_slow(item.strip())
+                if self.first_time_s is None:
+                    self.first_time_s = frame.time_s
+                self.last_time_s = frame.time_s
+                if keep_ids is not None and _is_unrelated(frame, keep_ids):
+                    self.skipped += 1
                     continue
-            temp = line.strip()
-            if temp:
-                yield _candump_line_slow(temp)
+                yield frame
+            else:
+                yield item
 
 
 def read_log(path: str | Path) -> Iterator[Frame]:
     """Frames of a log file, in file order (timestamps may go backwards in spliced logs)."""
-    path = Path(path)
-    _check_suffix(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such log file")
-    if path.suffix.lower() == ".log":
-        yield from _read_candump(path)
-        return
-    reader = can.LogReader(str(path))
-    try:
-        for msg in reader:
-            yield message_to_frame(msg)
-    finally:
-        stop = getattr(reader, "stop", None)
-        if stop is not None:
-            stop()
+    return iter(LogFrames(path))
 
 
 class LogWriter:

@@ -110,6 +110,12 @@ class Pipeline:
         self._last_trigger_s = frame.time_s
         return self._update(frame.time_s, result)
 
+    def count_unrelated(self, frames: int) -> None:
+        """Count standard-ID data frames of other IDs that a reader dropped before `process`."""
+        self.stats.frames_read += frames
+        if frames:
+            self.stats.ignored["unrelated IDs"] += frames
+
     def _ignore(self, frame: Frame) -> None:
         """Count a frame that is not an input, by kind."""
         if frame.is_error:

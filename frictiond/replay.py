@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Protocol
 
+from .busio import LogFrames
 from .frames import Frame
 from .pipeline import Pipeline, PipelineStats
 from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
@@ -53,7 +55,8 @@ class ReplaySummary:
             f"frames read       {s.frames_read}  ({span:.2f} s of log)",
             f"input frames      {s.input_frames}",
             f"ignored frames    {s.ignored_frames}  (not inputs"
-            + "".join(f"; {k}: {v}" for k, v in s.ignored.items() if v) + ")",
+            # the most first, in an order that does not depend on which kind came first
+            + "".join(f"; {k}: {v}" for k, v in sorted(s.ignored.items(), key=lambda kv: (-kv[1], kv[0])) if v) + ")",
             f"error frames      {s.error_frames}",
             f"undecodable       {s.undecodable_total}"
             + ("" if not s.undecodable else "  (" + "; ".join(f"{k}: {v}" for k, v in s.undecodable.most_common(5)) + ")"),
@@ -110,6 +113,24 @@ def replay_frames(
         pipeline.input_codec.counter_jumps, pipeline.front_end.skipped_triggers,
         pipeline.front_end.measured_period_s, pipeline.front_end.period_mismatch(),
     )
+
+
+def replay_log(
+    pipeline: Pipeline,
+    path: str | Path,
+    sink: FrameSink | None = None,
+    recorder: ReplayRecorder | None = None,
+) -> ReplaySummary:
+    """`replay_frames` over a log file, as `frictiond replay` runs it.
+
+    The reader drops standard-ID frames of IDs the pipeline does not take before building them
+    (most of a loaded bus); the pipeline counts them as it would have, and the summary's span is
+    the whole log's.
+    """
+    frames = LogFrames(path, keep_ids=pipeline.input_codec.input_ids)
+    summary = replay_frames(pipeline, frames, sink, recorder)
+    pipeline.count_unrelated(frames.skipped)
+    return dataclasses.replace(summary, first_time_s=frames.first_time_s, last_time_s=frames.last_time_s)
 
 
 def estimates_of(config: Any, frames: Iterable[Frame]) -> tuple[Pipeline, list[FrictionEstimate]]:

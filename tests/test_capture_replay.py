@@ -17,7 +17,7 @@ from frictiond.busio import LogWriter
 from frictiond.config import load_config
 from frictiond.frames import Frame
 from frictiond.pipeline import Pipeline
-from frictiond.replay import ReplayRecorder, replay_frames
+from frictiond.replay import ReplayRecorder, replay_frames, replay_log
 from frictiond.samples import Status
 from frictiond.sim_frames import background_traffic, merge_frames, simulate_frames
 
@@ -131,6 +131,33 @@ def test_capture_with_spikes_and_junk_through_the_cli(tmp_path):
     # The same junk in both; only the spiked capture has invalid (0x7FFF) wheel speeds.
     clean_undecodable = next(line for line in clean_summary.splitlines() if line.startswith("undecodable"))
     assert "wrong length" in clean_undecodable and "out of range" not in clean_undecodable
+
+
+class ListSink(list):
+    write = list.append
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc"])
+def test_replaying_a_log_skips_unrelated_ids_unread_and_counts_them_the_same(tmp_path, suffix):
+    frames, _ = capture(True)
+    frames.insert(0, Frame(frames[0].time_s - 0.5, 0x456, b"\x01"))    # span from unrelated frames
+    frames.append(Frame(frames[-1].time_s + 0.5, 0x457, b"\x02"))
+    log = tmp_path / f"capture{suffix}"
+    with LogWriter(log) as writer:
+        writer.write_all(frames)
+    config = load_config(EXAMPLE)
+    every, every_out = Pipeline(config), ListSink()
+    from frictiond.busio import read_log
+
+    reference = replay_frames(every, read_log(log), every_out)
+    pipeline, out = Pipeline(config), ListSink()
+    summary = replay_log(pipeline, log, out)
+    assert summary.stats == reference.stats and summary.stats.frames_read == len(frames)
+    assert summary.stats.ignored["unrelated IDs"] > 30_000
+    assert summary.format() == reference.format()
+    assert (summary.first_time_s, summary.last_time_s) == (reference.first_time_s, reference.last_time_s)
+    assert summary.last_time_s - summary.first_time_s == pytest.approx(frames[-1].time_s - frames[0].time_s, abs=1e-5)
+    assert out == every_out and len(out) > 1000
 
 
 def test_bit_flips_in_wheel_speed_frames_never_give_a_false_valid():

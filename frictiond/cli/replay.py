@@ -27,8 +27,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _do_replay(args: argparse.Namespace) -> int:
-    from ..busio import LogFormatError, LogWriter, read_log
-    from ..replay import ReplayRecorder, replay_frames
+    from ..busio import LogFormatError, LogWriter
+    from ..replay import ReplayRecorder, replay_log
 
     config = load_config_or_exit(args.config)
     input_path = Path(args.input)
@@ -62,8 +62,7 @@ def _do_replay(args: argparse.Namespace) -> int:
     try:
         if args.output:
             writer = LogWriter(args.output)
-        frames = read_log(input_path)
-        summary = replay_frames(pipeline, frames, writer, recorder)
+        summary = replay_log(pipeline, input_path, writer, recorder)
     except LogFormatError as exc:
         return fail(str(exc), EXIT_DATA_ERROR)
     except (OSError, ValueError) as exc:

@@ -717,10 +717,31 @@ static PyObject *py_mu_partials_few(PyObject *self, PyObject *args)
 
 /* ------------------------------------------------------------ per-wheel statistics */
 
+
+/* numpy's float "less than": NaN is the largest. */
+static inline int npy_less(double a, double b) { return a < b || (b != b && a == a); }
+
 static int cmp_double(const void *a, const void *b)
 {
     const double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
+    return npy_less(y, x) - npy_less(x, y);
+}
+
+/* Ascending in numpy's order (NaN last). A wheel's recent samples are a few dozen: insertion
+ * sort there, without qsort's call per comparison (most of the excitation's cost before). */
+static void sort_values(double *v, Py_ssize_t n)
+{
+    if (n > 64) {
+        qsort(v, (size_t)n, sizeof(double), cmp_double);
+        return;
+    }
+    for (Py_ssize_t i = 1; i < n; i++) {
+        const double x = v[i];
+        Py_ssize_t k = i;
+        for (; k > 0 && npy_less(x, v[k - 1]); k--)
+            v[k] = v[k - 1];
+        v[k] = x;
+    }
 }
 
 /* numpy's linear quantile of sorted values (its lerp, the same on both sides of 1/2). */
@@ -743,8 +764,6 @@ static double quantile_sorted(const double *v, Py_ssize_t n, double q)
  * slips and μ of order k_lo, k_hi (k = n // 10 from each end, as the excitation test takes
  * them); the fastest slip run-away over `lag` samples whose force did not follow; the sums
  * of the through-origin quadratic fit. estimator._wheel_stats_numpy is the reference. */
-/* numpy's float "less than": NaN is the largest. */
-static inline int npy_less(double a, double b) { return a < b || (b != b && a == a); }
 
 /* numpy's a[lo:hi].searchsorted(t, side="left") + lo: the first k with a[k] >= t (NaN sorts last). */
 static Py_ssize_t search_left(const double *a, Py_ssize_t lo, Py_ssize_t hi, double t)
@@ -810,7 +829,7 @@ static PyObject *wheel_stats_of(const double *slip, const double *mu, const Py_s
         stats[0] = (double)n;
         if (n > 0) {
             memcpy(sorted, lam, n * sizeof(double));
-            qsort(sorted, n, sizeof(double), cmp_double);
+            sort_values(sorted, n);
             stats[1] = quantile_sorted(sorted, n, 0.1);
             stats[2] = quantile_sorted(sorted, n, 0.9);
             Py_ssize_t k_hi = n - 1 - (n / 10 > 1 ? n / 10 : 1), k_lo = n / 10 > 1 ? n / 10 : 1;
@@ -821,7 +840,7 @@ static PyObject *wheel_stats_of(const double *slip, const double *mu, const Py_s
             stats[3] = sorted[k_lo];
             stats[4] = sorted[k_hi];
             memcpy(sorted, mus, n * sizeof(double));
-            qsort(sorted, n, sizeof(double), cmp_double);
+            sort_values(sorted, n);
             stats[5] = sorted[k_hi];
             double best = -INFINITY;
             for (Py_ssize_t j = 0; j + lag < n; j++) {
@@ -1391,7 +1410,7 @@ static PyObject *py_drift_reference(PyObject *self, PyObject *args)
         result = Py_NewRef(Py_None);
         goto out;
     }
-    qsort(values, n, sizeof(double), cmp_double);
+    sort_values(values, n);
     result = PyFloat_FromDouble(values[n / 2]);
 out:
     Py_XDECREF(it);

@@ -470,8 +470,8 @@ def test_drift_reference_is_the_confidence_loop():
 
     rng = np.random.default_rng(31)
     for _ in range(300):
-        n = int(rng.integers(1, 60))
-        times = np.cumsum(rng.uniform(0.0, 0.02, n))   # (steps of 0: repeated times)
+        n = int(rng.integers(1, 150))   # (the median is sorted in place up to 64 values, by qsort beyond)
+        times = np.cumsum(rng.uniform(0.0, 0.005 if n > 64 else 0.02, n))   # (steps of 0: repeated times)
         mus = rng.choice([0.2, 0.5, 0.8], n) + rng.normal(0, 0.01, n)
         history = deque(zip(times.tolist(), mus.tolist()))
         since = float(rng.uniform(-0.1, times[-1]))

@@ -258,6 +258,62 @@ static void subproblem(const double *w, const double *Q, const double *a, double
     }
 }
 
+/* The Newton step s = -H^{-1} g when it is certainly subproblem()'s answer: H positive definite
+ * with its smallest eigenvalue provably above subproblem()'s threshold (1/|H^{-1}|_F bounds it
+ * from below, the largest row sum bounds the largest from above) and |s| <= radius. Then the
+ * eigen-decomposition, most of an iteration's cost, is not needed. 0: use subproblem(). */
+static int newton_step(const double *H, const double *g, double radius, double *s)
+{
+    double L[NP][NP], inv[NP][NP];
+    double row_max = 0.0;
+    for (int i = 0; i < NP; i++) {
+        double row = 0.0;
+        for (int k = 0; k < NP; k++)
+            row += fabs(H[i * NP + k]);
+        row_max = fmax(row_max, row);
+        for (int k = 0; k <= i; k++) {
+            double v = H[i * NP + k];
+            for (int j = 0; j < k; j++)
+                v -= L[i][j] * L[k][j];
+            if (k == i) {
+                if (!(v > 0.0))
+                    return 0;
+                L[i][i] = sqrt(v);
+            } else
+                L[i][k] = v / L[k][k];
+        }
+    }
+    /* H^{-1} column by column: L y = e_c, then L^T z = y */
+    double frob = 0.0;
+    for (int c = 0; c < NP; c++) {
+        double y[NP];
+        for (int i = 0; i < NP; i++) {
+            double v = (i == c);
+            for (int j = 0; j < i; j++)
+                v -= L[i][j] * y[j];
+            y[i] = v / L[i][i];
+        }
+        for (int i = NP - 1; i >= 0; i--) {
+            double v = y[i];
+            for (int j = i + 1; j < NP; j++)
+                v -= L[j][i] * inv[j][c];
+            inv[i][c] = v / L[i][i];
+            frob += inv[i][c] * inv[i][c];
+        }
+    }
+    if (!(1.0 / sqrt(frob) > 1e-12 * fmax(1.0, row_max)))
+        return 0;
+    double ss = 0.0;
+    for (int i = 0; i < NP; i++) {
+        double v = 0.0;
+        for (int k = 0; k < NP; k++)
+            v += inv[i][k] * g[k];
+        s[i] = -v;
+        ss += v * v;
+    }
+    return ss <= radius * radius;
+}
+
 static double norm(const double *v)
 {
     double s = 0.0;
@@ -345,12 +401,7 @@ static Outcome solve(const Problem *p, double *x, const double *lb, const double
             }
         if (!finite)
             break;
-        eigh(H, w, Q);
-        for (int k = 0; k < NP; k++) {
-            a[k] = 0.0;
-            for (int i = 0; i < NP; i++)
-                a[k] += g_h[i] * Q[i * NP + k];
-        }
+        int have_eigen = 0;
         out.iterations++;
         const double theta = fmax(0.995, 1.0 - gh_max);
         double upper_room[NP], lower_room[NP];
@@ -361,7 +412,18 @@ static Outcome solve(const Problem *p, double *x, const double *lb, const double
         double cost_new = cost, actual = 0.0, s[NP], s_h[NP];
         int accepted = 0;
         for (int attempt = 0; attempt < max_rejections; attempt++) {
-            subproblem(w, Q, a, radius, s_h);
+            if (have_eigen || !newton_step(H, g_h, radius, s_h)) {
+                if (!have_eigen) {
+                    eigh(H, w, Q);
+                    for (int k = 0; k < NP; k++) {
+                        a[k] = 0.0;
+                        for (int i = 0; i < NP; i++)
+                            a[k] += g_h[i] * Q[i * NP + k];
+                    }
+                    have_eigen = 1;
+                }
+                subproblem(w, Q, a, radius, s_h);
+            }
             int outside = 0;
             for (int i = 0; i < NP; i++) {
                 s[i] = d[i] * s_h[i];

@@ -87,6 +87,32 @@ def test_compiled_normal_equations_use_the_series_near_zero_slip():
 
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
+@pytest.mark.parametrize("radius", [50.0, 0.3, 1e-3])   # the Newton step inside; on the boundary
+@pytest.mark.parametrize("offset", [[0.0] * 7, [0.1, -0.2, 0.3, 0.05, 0.1, -0.1, 0.2], [-1.0, 0.5, 1.0, 0.2, 0.4, 0.6, -0.3]])
+def test_one_compiled_step_is_the_numpy_step(radius, offset):
+    # The compiled solve takes the Newton step without an eigen-decomposition when it lies
+    # inside the radius; numpy's path always solves the subproblem from eigh. Same step.
+    from frictiond import trust_region
+
+    est, sw = _window_problem(theta=2.5, seed=3, duration=0.8)
+    start = est._x + np.array(offset)
+    reference = trust_region.solve_normal(lambda x: est._normal(x, sw), start, est._lb, est._ub, radius=radius,
+                                          max_iterations=1, ftol=0.0, xtol=0.0, gtol=0.0, max_rejections=1)
+    w = est._window
+    lo, hi = w.start, w.end
+    x = start.copy()
+    _, c_radius, iterations, _, evaluations = core.solve(
+        w.pow_lam_v[lo:hi], w.stiff[lo:hi], w.lam_v[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], sw, x, est._lb, est._ub,
+        est._prior, est._inv_prior_std, est._tie_rel_d, np.empty(7), np.empty((7, 7)), np.empty(hi - lo),
+        np.empty(hi - lo), est._core_constants, radius, 1, 0.0, 0.0, 0.0, 0.0, 1)
+    assert (iterations, evaluations) == (reference.iterations, reference.evaluations) == (1, 2)
+    step, ref_step = x - start, reference.x - start
+    assert np.linalg.norm(ref_step) > 1e-6
+    np.testing.assert_allclose(step, ref_step, rtol=1e-7, atol=1e-9 * np.abs(ref_step).max())
+    assert c_radius == pytest.approx(reference.radius, rel=1e-7)
+
+
+@pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
 @pytest.mark.parametrize("theta", [1.0, 3.5, 30.0])
 def test_compiled_solve_to_tolerance_finds_the_numpy_solution(theta):
     from frictiond import trust_region

@@ -126,6 +126,9 @@ class DecodedInput(NamedTuple):
     is_trigger: bool
 
 
+_new_tuple = tuple.__new__
+
+
 def _resolve_unit(name: str, source: SignalSource, dbc_unit: str, wheel_radius: float) -> tuple[str, float, str]:
     quantity = _QUANTITY[name]
     table = _UNITS[quantity]
@@ -385,7 +388,8 @@ class InputCodec:
                 values, counter = decoded
                 if counter is not None:
                     self._count(frame.can_id, counter)
-                return DecodedInput(frame.time_s, plan.name, values, plan.is_trigger)
+                # (tuple.__new__: the NamedTuple without its Python-level __new__, a frame per input)
+                return _new_tuple(DecodedInput, (frame.time_s, plan.name, values, plan.is_trigger))
             # Refused (a range or a value): the Python path below says why.
         if plan.fields is not None:
             raw = plan.unpack(data)
@@ -766,8 +770,10 @@ class OutputCodec:
 
     def encode_estimate(self, estimate: FrictionEstimate) -> bytes:
         status = int(estimate.status)
-        numbers = (estimate.mu_max, estimate.slip_at_mu_max, estimate.theta, estimate.confidence)
-        if not all(math.isfinite(x) for x in numbers):
+        numbers = mu, slip, theta, confidence = (estimate.mu_max, estimate.slip_at_mu_max, estimate.theta,
+                                                 estimate.confidence)
+        isfinite = math.isfinite
+        if not (isfinite(mu) and isfinite(slip) and isfinite(theta) and isfinite(confidence)):
             # Never put NaN/inf on the bus; say FAULT instead of a number nobody can trust.
             status = int(Status.FAULT)
             numbers = tuple(x if math.isfinite(x) else 0.0 for x in numbers)

@@ -424,6 +424,7 @@ class LugreTrustRegionEstimator:
         self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
         self._prior_peak: tuple[tuple, tuple] | None = None   # (speed, prior) → peak of the prior
         self._params_cache: tuple[tuple, list] | None = None
+        self._x_floats: tuple | None = None   # (x, x as floats, θ per wheel, compiled parameters)
         self._core_constants = (float(o.mu_c), float(o.mu_s - o.mu_c), self._alpha) + self._shared_scale
         self._gradient_buffer, self._normal_buffer = np.empty(len(self._scale)), np.empty((len(self._scale),) * 2)
         # The compiled fit when installed; `None` runs the numpy path (tests, benchmarks compare).
@@ -609,6 +610,15 @@ class LugreTrustRegionEstimator:
     def _thetas(x: np.ndarray) -> np.ndarray:
         """Each wheel's θ from the fitted ln θ."""
         return np.exp(x[:N_WHEELS])
+
+    def _floats_of_x(self) -> tuple[list[float], list[float], tuple[float, ...]]:
+        """The fitted point as floats: (x, each wheel's θ, `_compiled_params(x)`), kept until
+        `_x` is replaced (each fit makes a new array; nothing changes one in place)."""
+        x = self._x
+        cached = self._x_floats
+        if cached is None or cached[0] is not x:
+            cached = self._x_floats = (x, x.tolist(), self._thetas(x).tolist(), self._compiled_params(x))
+        return cached[1], cached[2], cached[3]
 
     def _params(self, x: np.ndarray) -> LugreParams:
         entry = self._params_entry(x)
@@ -892,17 +902,15 @@ class LugreTrustRegionEstimator:
         where they stay in the window's scratch), `samples` their number."""
         o = self.options
         x = self._x
-        shared = self._compiled_params(x)   # (σ0, v_s, σ2 at 3, 5, 6)
-        thetas = self._thetas(x)
+        x_list, theta_list, shared = self._floats_of_x()   # (shared: σ0, v_s, σ2 at 3, 5, 6)
         v_eval = max(speed, 1.0)
         near = self._last_peak_slips
-        theta_list = thetas.tolist()
         found = None
         if self.core is not None and near is not None:
             found = self.core.peaks_near(v_eval, theta_list, near, shared)
             near = None   # (tried: what is left is the grid search)
         if found is None:
-            grid_mu, grid_lam = peaks(v_eval, self._params(x), thetas, near=near)
+            grid_mu, grid_lam = peaks(v_eval, self._params(x), self._thetas(x), near=near)
             found = (grid_mu.tolist(), grid_lam.tolist())
         wheel_mu, wheel_lam = found
         self._last_peak_slips = wheel_lam
@@ -918,7 +926,7 @@ class LugreTrustRegionEstimator:
             if self.core is not None:
                 # (the same test in floats: seven numbers do not need numpy's per-call cost)
                 free_list = [v - lb > 1e-3 * (ub - lb) and ub - v > 1e-3 * (ub - lb)
-                             for v, lb, ub in zip(x.tolist(), self._lb_list, self._ub_list)]
+                             for v, lb, ub in zip(x_list, self._lb_list, self._ub_list)]
                 cov = np.empty((len(x), len(x)))
                 if not self.core.inverse_free(normal, free_list, cov):
                     cov[:] = np.inf
@@ -1129,8 +1137,8 @@ class LugreTrustRegionEstimator:
         """The fitted μ of each wheel at the high end of its recent slips."""
         lam_hi = [s if math.isfinite(s) else 1e-3 for s in self._slip_support]
         if self.core is not None:   # (braking_mu_and_partials_few's compiled call, without its arrays)
-            return self.core.mu_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x).tolist(),
-                                             self._compiled_params(self._x))[0]
+            _, theta_list, shared = self._floats_of_x()
+            return self.core.mu_partials_few(lam_hi, max(speed, 1.0), theta_list, shared)[0]
         mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
         return mu
 
@@ -1159,7 +1167,7 @@ class LugreTrustRegionEstimator:
         fit_at_hi = self._fit_at_high_slip(speed)
         # A θ held at its bound is not where the data put it: its peak proves nothing.
         at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
-                    zip(self._x[:N_WHEELS].tolist(), self._theta_bounds)]
+                    zip(self._floats_of_x()[0][:N_WHEELS], self._theta_bounds)]
         if self.core is not None:
             # The loop below, compiled (`_fitcore.excitation_verdicts`, the same reasons).
             verdicts = self.core.excitation_verdicts(wheel_stats, at_bound, self._peak_seen, wheel_mu, wheel_lam,

@@ -617,7 +617,10 @@ class LugreTrustRegionEstimator:
         x = self._x
         cached = self._x_floats
         if cached is None or cached[0] is not x:
-            cached = self._x_floats = (x, x.tolist(), self._thetas(x).tolist(), self._compiled_params(x))
+            xs = x.tolist()
+            exp = math.exp   # (np.exp of four numbers costs more than the four calls)
+            thetas = [exp(xs[0]), exp(xs[1]), exp(xs[2]), exp(xs[3])]
+            cached = self._x_floats = (x, xs, thetas, self._params_entry_of(tuple(xs[N_WHEELS:]))[0])
         return cached[1], cached[2], cached[3]
 
     def _params(self, x: np.ndarray) -> LugreParams:
@@ -636,7 +639,10 @@ class LugreTrustRegionEstimator:
 
     def _params_entry(self, x: np.ndarray) -> list:
         """[compiled parameters, LugreParams or None until asked for] of the shared parameters in x."""
-        key = tuple(x[N_WHEELS:].tolist())
+        return self._params_entry_of(tuple(x[N_WHEELS:].tolist()))
+
+    def _params_entry_of(self, key: tuple[float, ...]) -> list:
+        """`_params_entry` of the shared parameters as floats."""
         cached = self._params_cache
         if cached is not None and cached[0] == key:
             return cached[1]

@@ -38,6 +38,7 @@ from .samples import PhysicalSample
 from .vehicle import GRAVITY_MPS2, VehicleParams
 
 WHEEL_SPEED_NAMES = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
+_FL, _FR, _RL, _RR = WHEEL_SPEED_NAMES
 PRESSURE_NAMES = ("brake_pressure_fl", "brake_pressure_fr", "brake_pressure_rl", "brake_pressure_rr")
 DRIVE_TORQUE_NAMES = ("drive_torque_fl", "drive_torque_fr", "drive_torque_rl", "drive_torque_rr")
 REQUIRED_INPUTS = WHEEL_SPEED_NAMES + ("accel_long", "accel_lat") + PRESSURE_NAMES
@@ -343,19 +344,24 @@ class FrontEnd:
         opts = self.options
         stale = self.stale_messages(time_s)
         values = history.merged
+        # (the four wheels spelt out: this runs at the bus rate, and loops cost a frame each)
         try:
-            speeds = tuple(float(values[n]) for n in WHEEL_SPEED_NAMES)
+            speeds = fl, fr, rl, rr = (float(values[_FL]), float(values[_FR]), float(values[_RL]), float(values[_RR]))
         except KeyError:
             return FrontEndResult(None, stale, None)
-        if any(not (0.0 <= w <= MAX_WHEEL_SPEED_RADPS) for w in speeds):
+        top = MAX_WHEEL_SPEED_RADPS
+        if not (0.0 <= fl <= top and 0.0 <= fr <= top and 0.0 <= rl <= top and 0.0 <= rr <= top):   # (NaN: out)
             self._wheel_times.clear()
             self._wheel_speeds.clear()
             return FrontEndResult(None, stale, "wheel speed out of range")
 
         # A sensor that repeats exactly the same reading frame after frame while the car
         # changes speed is stuck (quantised noise makes exact repeats rare on a live sensor).
-        for i, w in enumerate(speeds):
-            self._repeats[i] = self._repeats[i] + 1 if w == self._previous_speeds[i] and w > 1.0 else 0
+        repeats, previous = self._repeats, self._previous_speeds
+        repeats[0] = repeats[0] + 1 if fl == previous[0] and fl > 1.0 else 0
+        repeats[1] = repeats[1] + 1 if fr == previous[1] and fr > 1.0 else 0
+        repeats[2] = repeats[2] + 1 if rl == previous[2] and rl > 1.0 else 0
+        repeats[3] = repeats[3] + 1 if rr == previous[3] and rr > 1.0 else 0
         self._previous_speeds = speeds
         dt = time_s - self._last_trigger_s
         if 0.0 < dt <= opts.max_gap:

@@ -1333,19 +1333,35 @@ static PyObject *py_append_samples(PyObject *self, PyObject *args)
  * residuals' sum of squares and `residual_bias` of the samples from `search_left(jump_t)` on
  * (`first` relative to lo; mean, rms and same_sign 0 when there are none).
  * arrays: (pow_lam_v, stiff, lam_v, mu, wheel, time, scratch (4 x capacity), core_rows (capacity x 5)). */
-static PyObject *py_fit_window(PyObject *self, PyObject *args)
+/* METH_FASTCALL, its 25 arguments converted here (PyArg_ParseTuple's format was a tenth of the call). */
+static PyObject *py_fit_window(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    PyObject *arrays, *objs[9], *o_rows_x;
+    PyObject *arrays, *objs[9];
     Py_ssize_t lo, hi, cached_n;
-    double now, tau, sigma, jump_t, mu_c, dmu, alpha, sc4, sc5, sc6, radius, ftol, xtol, gtol, predicted_ftol;
+    double now, tau, sigma, jump_t, constants[6], radius, ftol, xtol, gtol, predicted_ftol;
     int max_iterations, max_rejections;
-    if (!PyArg_ParseTuple(args, "O!nnddddOOOOOOOO(dddddd)diddddiOn:fit_window", &PyTuple_Type, &arrays, &lo, &hi,
-                          &now, &tau, &sigma, &jump_t, &objs[0], &objs[1], &objs[2], &objs[3], &objs[4], &objs[5],
-                          &objs[6], &objs[7], &mu_c, &dmu, &alpha, &sc4, &sc5, &sc6, &radius, &max_iterations, &ftol,
-                          &xtol, &gtol, &predicted_ftol, &max_rejections, &o_rows_x, &cached_n))
+    if (!arg_count("fit_window", nargs, 25))
         return NULL;
-    objs[8] = o_rows_x;
+    arrays = args[0];
+    if (!PyTuple_Check(arrays) || !PyTuple_Check(args[15]) || PyTuple_GET_SIZE(args[15]) != 6) {
+        PyErr_SetString(PyExc_TypeError, "fit_window: arrays must be a tuple, constants a 6-tuple");
+        return NULL;
+    }
+    for (int i = 0; i < 8; i++)
+        objs[i] = args[7 + i];
+    objs[8] = args[23];
+    for (int i = 0; i < 6; i++)
+        if (!arg_double(PyTuple_GET_ITEM(args[15], i), &constants[i]))
+            return NULL;
+    if (!arg_ssize(args[1], &lo) || !arg_ssize(args[2], &hi) || !arg_double(args[3], &now)
+        || !arg_double(args[4], &tau) || !arg_double(args[5], &sigma) || !arg_double(args[6], &jump_t)
+        || !arg_double(args[16], &radius) || !arg_int(args[17], &max_iterations) || !arg_double(args[18], &ftol)
+        || !arg_double(args[19], &xtol) || !arg_double(args[20], &gtol) || !arg_double(args[21], &predicted_ftol)
+        || !arg_int(args[22], &max_rejections) || !arg_ssize(args[24], &cached_n))
+        return NULL;
+    const double mu_c = constants[0], dmu = constants[1], alpha = constants[2], sc4 = constants[3],
+                 sc5 = constants[4], sc6 = constants[5];
     if (PyTuple_GET_SIZE(arrays) != 8) {
         PyErr_SetString(PyExc_ValueError, "fit_window: arrays are the window's 8 columns");
         return NULL;
@@ -1690,7 +1706,7 @@ static PyMethodDef methods[] = {
      "residual_bias(r_data, weights, first, sigma) -> (mean, rms deviation, |sum of signs| / n) of r*sigma/sqrt(w)"},
     {"inverse_free", py_inverse_free, METH_VARARGS,
      "inverse_free(normal, free, out) -> bool: the inverse of the free parameters' block, zero elsewhere"},
-    {"fit_window", py_fit_window, METH_VARARGS,
+    {"fit_window", (PyCFunction)(void (*)(void))py_fit_window, METH_FASTCALL,
      "fit_window(arrays, lo, hi, now, tau, sigma, jump_t, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
      "constants, radius, max_iterations, ftol, xtol, gtol, predicted_ftol, max_rejections, rows_x, cached_n)\n"
      "-> (w_sum, radius, r.r, first, mean, rms, same_sign): weights, solve and residual_bias on the window's columns"},

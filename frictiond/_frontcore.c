@@ -373,13 +373,19 @@ static PyObject *py_values_at(PyObject *self, PyObject *args)
 static PyObject *deque_append;   /* collections.deque.append, called on the series' deques */
 
 /* _MessageHistory.push's loop: each value into `merged` and onto its (times, values) deques. */
-static PyObject *py_push_values(PyObject *self, PyObject *args)
+/* METH_FASTCALL (once per input frame: PyArg_ParseTuple's format cost as much as the loop). */
+static PyObject *py_push_values(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    PyObject *series, *merged, *time_s, *values, *new_pair;
-    if (!PyArg_ParseTuple(args, "O!O!O!O!O:push_values", &PyDict_Type, &series, &PyDict_Type, &merged,
-                          &PyFloat_Type, &time_s, &PyDict_Type, &values, &new_pair))
+    if (nargs != 5) {
+        PyErr_Format(PyExc_TypeError, "push_values() takes 5 arguments (%zd given)", nargs);
         return NULL;
+    }
+    PyObject *series = args[0], *merged = args[1], *time_s = args[2], *values = args[3], *new_pair = args[4];
+    if (!PyDict_Check(series) || !PyDict_Check(merged) || !PyFloat_Check(time_s) || !PyDict_Check(values)) {
+        PyErr_SetString(PyExc_TypeError, "push_values(series: dict, merged: dict, time_s: float, values: dict, new_pair)");
+        return NULL;
+    }
     Py_ssize_t pos = 0;
     PyObject *name, *value;
     while (PyDict_Next(values, &pos, &name, &value)) {
@@ -1017,7 +1023,7 @@ static PyMethodDef methods[] = {
     {"matched_many", py_matched_many, METH_VARARGS,
      "matched_many(lookups, times, weights) -> tuple: `matched` of each (series dict, name, floor or None)\n"
      "of lookups (or None); None for a signal without a series yet."},
-    {"push_values", py_push_values, METH_VARARGS,
+    {"push_values", (PyCFunction)(void (*)(void))py_push_values, METH_FASTCALL,
      "push_values(series, merged, time_s, values, new_pair) -> None: _MessageHistory.push's loop\n"
      "(new_pair() makes the (times, values) deques of a signal seen for the first time)."},
     {"values_at", py_values_at, METH_VARARGS,

@@ -243,6 +243,17 @@ def test_unpack_si_refuses_tables_that_do_not_agree():
         core.unpack_si(fields, checks, si, names[:-1], counter, b"\x00" * 8)
     with pytest.raises(ValueError):
         core.unpack_si(fields, checks, si, names, counter, b"\x00" * 9)
+    # Its arguments are converted by hand (METH_FASTCALL): wrong ones are refused, none crashes.
+    good = [fields, checks, si, names, counter, b"\x00" * 8]
+    for k, wrong in ((0, "text"), (1, None), (2, 3), (3, list(names)), (4, 1.0), (4, "1"), (5, [0] * 8)):
+        args = list(good)
+        args[k] = wrong
+        with pytest.raises(TypeError):
+            core.unpack_si(*args)
+    with pytest.raises(TypeError, match="6 arguments"):
+        core.unpack_si(*good[:5])
+    assert core.unpack_si(*good) is not None
+    assert core.unpack_si(bytearray(fields), memoryview(checks), si, names, counter, bytearray(8)) == core.unpack_si(*good)
 
 
 @needs_core

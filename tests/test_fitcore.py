@@ -475,6 +475,20 @@ def test_fit_window_is_weights_solve_and_bias_on_the_window(trim):
             np.array(core.wheel_stats(w.slip[k:hi], w.mu[k:hi], w.wheel[k:hi], w.time[k:hi], 5, 0.5)))
     with pytest.raises(ValueError, match="outside"):
         core.recent_wheel_stats(w.slip, w.core_columns, lo, w.capacity + 1, 0.5, 5, 0.5)
+    # Its arguments are converted by hand (METH_FASTCALL): each wrong one is refused, none crashes.
+    good = [w.core_columns, lo, hi, now, tau, sigma, jump_t, x0.copy(), est._lb, est._ub, est._prior,
+            est._inv_prior_std, est._tie_rel_d, c_gradient, c_normal, est._core_constants, 0.5, 8, 1e-6, 1e-6, 1e-8,
+            1e-3, 4, x0, 0]
+    for k, wrong in ((0, list(w.core_columns)), (1, 1.5), (2, "9"), (3, "now"), (15, est._core_constants[:5]),
+                     (15, list(est._core_constants)), (16, None), (17, 2.0), (17, 1 << 40), (22, "4"), (24, 0.0),
+                     (7, [0.0] * 7), (23, x0.astype(np.float32))):
+        args = list(good)
+        args[k] = wrong
+        with pytest.raises((TypeError, ValueError, OverflowError)):
+            core.fit_window(*args)
+    with pytest.raises(TypeError, match="25 arguments"):
+        core.fit_window(*good[:-1])
+    assert core.fit_window(*good)[3] == first   # (the good arguments still work)
 
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")

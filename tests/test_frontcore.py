@@ -157,6 +157,16 @@ def test_history_push_is_the_same_on_both_paths():
         assert {n: (list(ts), list(vs)) for n, (ts, vs) in compiled.series.items()} == \
                {n: (list(ts), list(vs)) for n, (ts, vs) in floats.series.items()}
     assert all(ts.maxlen == 16 for ts, _ in compiled.series.values())
+    # push_values converts its arguments itself (METH_FASTCALL): wrong ones are refused.
+    good = [compiled.series, compiled.merged, t + 1.0, {"a": 1.0}, frontend_module._new_series]
+    for k, wrong in ((0, []), (1, None), (2, 1), (3, [("a", 1.0)])):
+        args = list(good)
+        args[k] = wrong
+        with pytest.raises(TypeError):
+            core.push_values(*args)
+    with pytest.raises(TypeError, match="5 arguments"):
+        core.push_values(*good[:4])
+    assert core.push_values(*good) is None and compiled.merged["a"] == 1.0
 
 
 # The state `_frontcore.sample_physics` carries between samples (on the FrontEnd's attributes).

@@ -66,6 +66,38 @@ static inline int arg_int(PyObject *o, int *out)
     return 1;
 }
 
+static inline int arg_bool(PyObject *o, int *out)   /* "p" */
+{
+    const int v = PyObject_IsTrue(o);
+    if (v < 0)
+        return 0;
+    *out = v;
+    return 1;
+}
+
+static inline int arg_type(PyObject *o, PyTypeObject *type, const char *name)   /* "O!" */
+{
+    if (PyObject_TypeCheck(o, type))
+        return 1;
+    PyErr_Format(PyExc_TypeError, "%s must be %s, not %.50s", name, type->tp_name, Py_TYPE(o)->tp_name);
+    return 0;
+}
+
+/* "(dd...d)": exactly n numbers from a sequence. */
+static inline int arg_doubles(PyObject *o, double *out, Py_ssize_t n, const char *name)
+{
+    PyObject *seq = PySequence_Fast(o, name);
+    if (!seq)
+        return 0;
+    int ok = PySequence_Fast_GET_SIZE(seq) == n;
+    if (!ok)
+        PyErr_Format(PyExc_TypeError, "%s must be a sequence of %zd numbers", name, n);
+    for (Py_ssize_t i = 0; ok && i < n; i++)
+        ok = arg_double(PySequence_Fast_GET_ITEM(seq, i), &out[i]);
+    Py_DECREF(seq);
+    return ok;
+}
+
 static inline int arg_count(const char *name, Py_ssize_t nargs, Py_ssize_t expected)
 {
     if (nargs == expected)

@@ -323,14 +323,36 @@ static PyObject *K_crc, *K_counter, *K_wheel_index, *K_slip, *K_mu_used, *K_mu_m
  * -> [4 payloads] | None: OutputCodec.encode_wheels' four frames, wheel i with counter + i, each
  * as encode_frame (its values: the wheel's numbers, a non-finite one as 0.0, and `extra`). None
  * when a spec is missing or a frame is refused (the caller then takes the Python path). */
-static PyObject *py_encode_wheels(PyObject *self, PyObject *args)
+static PyObject *py_encode_wheels(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     PyObject *specs, *quads[4], *extra;
     Py_ssize_t length;
     long long data_id, counter, counter_bit;
-    if (!PyArg_ParseTuple(args, "O!nLLLOOOOO!", &PyTuple_Type, &specs, &length, &data_id, &counter, &counter_bit,
-                          &quads[0], &quads[1], &quads[2], &quads[3], &PyDict_Type, &extra))
+    /* (METH_FASTCALL: converted here, once per update, without a format string) */
+    if (nargs != 10) {
+        PyErr_Format(PyExc_TypeError, "encode_wheels() takes 10 arguments (%zd given)", nargs);
         return NULL;
+    }
+    specs = args[0], extra = args[9];
+    for (int i = 0; i < 4; i++)
+        quads[i] = args[5 + i];
+    if (!PyTuple_Check(specs) || !PyDict_Check(extra)) {
+        PyErr_SetString(PyExc_TypeError, "encode_wheels: specs must be a tuple, extra a dict");
+        return NULL;
+    }
+    length = PyNumber_AsSsize_t(args[1], PyExc_OverflowError);
+    if (length == -1 && PyErr_Occurred())
+        return NULL;
+    long long *const integers[3] = {&data_id, &counter, &counter_bit};
+    for (int i = 0; i < 3; i++) {
+        PyObject *number = PyNumber_Index(args[2 + i]);
+        if (!number)
+            return NULL;
+        *integers[i] = PyLong_AsLongLong(number);
+        Py_DECREF(number);
+        if (*integers[i] == -1 && PyErr_Occurred())
+            return NULL;
+    }
     if (PyTuple_GET_SIZE(specs) != 4) {
         PyErr_SetString(PyExc_ValueError, "encode_wheels: one spec per wheel");
         return NULL;
@@ -390,7 +412,7 @@ static PyMethodDef methods[] = {
     {"encode_frame", py_encode_frame, METH_VARARGS,
      "encode_frame(spec, names, values, length, data_id, counter, counter_bit) -> bytes | None:\n"
      "pack, then protect; None as pack."},
-    {"encode_wheels", py_encode_wheels, METH_VARARGS,
+    {"encode_wheels", (PyCFunction)(void (*)(void))py_encode_wheels, METH_FASTCALL,
      "encode_wheels(specs, length, data_id, counter, counter_bit, slips, mus_used, mus_max, loads, extra)\n"
      "-> [4 payloads] | None: the four FRICTION_WHEEL frames, wheel i with counter + i (encode_frame each)."},
     {"protect", py_protect, METH_VARARGS,

@@ -1008,14 +1008,19 @@ out:
 /* The reported numbers from the wheels' peaks (LugreTrustRegionEstimator._report_numbers_numpy):
  * each peak held within the slips the data support, the load-weighted μ_max, and by the delta
  * method the standard deviations of μ_max and of each wheel's peak. */
-static PyObject *py_peak_report(PyObject *self, PyObject *args)
+static PyObject *py_peak_report(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
     PyObject *o_mu, *o_lam, *o_support, *o_floor, *o_thetas, *o_share, *o_cov;
     double extrapolation, extrapolation_max_slip, v, variance_factor, c[7], sc[3];
-    if (!PyArg_ParseTuple(args, "OOOOddOd(ddddddd)(ddd)OdO:peak_report", &o_mu, &o_lam, &o_support, &o_floor,
-                          &extrapolation, &extrapolation_max_slip, &o_thetas, &v, &c[0], &c[1], &c[2], &c[3], &c[4],
-                          &c[5], &c[6], &sc[0], &sc[1], &sc[2], &o_cov, &variance_factor, &o_share))
+    /* (METH_FASTCALL: converted here, once per fit, without a format string) */
+    if (!arg_count("peak_report", nargs, 13))
+        return NULL;
+    o_mu = args[0], o_lam = args[1], o_support = args[2], o_floor = args[3], o_thetas = args[6];
+    o_cov = args[10], o_share = args[12];
+    if (!arg_double(args[4], &extrapolation) || !arg_double(args[5], &extrapolation_max_slip)
+        || !arg_double(args[7], &v) || !arg_doubles(args[8], c, 7, "params") || !arg_doubles(args[9], sc, 3, "scale")
+        || !arg_double(args[11], &variance_factor))
         return NULL;
     double wheel_mu[MAX_POINTS], wheel_lam[MAX_POINTS], support[MAX_POINTS], slip_floor[MAX_POINTS],
         thetas[MAX_POINTS], share[MAX_POINTS];
@@ -1274,14 +1279,24 @@ out:
 }
 
 /* _Window.append for several samples of one instant, at index k of the window's columns. */
-static PyObject *py_append_samples(PyObject *self, PyObject *args)
+static PyObject *py_append_samples(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     PyObject *slip_o, *speed_o, *mu_o, *time_o, *wheel_o, *lam_v_o, *pow_o, *stiff_o, *slips_o, *mus_o, *wheels_o;
     Py_ssize_t k;
     double speed, time_s, alpha, patch_length, max_slip;
-    if (!PyArg_ParseTuple(args, "(OOOOOOOO)nOdOdOddd", &slip_o, &speed_o, &mu_o, &time_o, &wheel_o, &lam_v_o,
-                          &pow_o, &stiff_o, &k, &slips_o, &speed, &mus_o, &time_s, &wheels_o, &alpha, &patch_length,
-                          &max_slip))
+    /* (METH_FASTCALL: converted here, once per update with samples, without a format string) */
+    if (!arg_count("append_samples", nargs, 10))
+        return NULL;
+    if (!PyTuple_Check(args[0]) || PyTuple_GET_SIZE(args[0]) != 8) {
+        PyErr_SetString(PyExc_TypeError, "append_samples: columns must be a tuple of 8 arrays");
+        return NULL;
+    }
+    slip_o = PyTuple_GET_ITEM(args[0], 0), speed_o = PyTuple_GET_ITEM(args[0], 1), mu_o = PyTuple_GET_ITEM(args[0], 2);
+    time_o = PyTuple_GET_ITEM(args[0], 3), wheel_o = PyTuple_GET_ITEM(args[0], 4);
+    lam_v_o = PyTuple_GET_ITEM(args[0], 5), pow_o = PyTuple_GET_ITEM(args[0], 6), stiff_o = PyTuple_GET_ITEM(args[0], 7);
+    slips_o = args[2], mus_o = args[4], wheels_o = args[6];
+    if (!arg_ssize(args[1], &k) || !arg_double(args[3], &speed) || !arg_double(args[5], &time_s)
+        || !arg_double(args[7], &alpha) || !arg_double(args[8], &patch_length) || !arg_double(args[9], &max_slip))
         return NULL;
     double slips[MAX_POINTS], mus[MAX_POINTS], wheels[MAX_POINTS];
     const Py_ssize_t n = floats(slips_o, slips, "slips");
@@ -1669,7 +1684,7 @@ static PyObject *py_search_left(PyObject *self, PyObject *args)
 }
 
 static PyMethodDef methods[] = {
-    {"append_samples", py_append_samples, METH_VARARGS,
+    {"append_samples", (PyCFunction)(void (*)(void))py_append_samples, METH_FASTCALL,
      "append_samples(columns, k, slips, speed, mus, time_s, wheels, alpha, patch_length, max_slip) -> None\n\n"
      "_Window.append of one instant's samples (one per wheel) at index k of the window's 8 columns\n"
      "(slip, speed, mu, time, wheel, lam_v, pow_lam_v, stiff)."},
@@ -1695,7 +1710,7 @@ static PyMethodDef methods[] = {
     {"recent_wheel_stats", py_recent_wheel_stats, METH_VARARGS,
      "recent_wheel_stats(slip, columns, lo, hi, threshold, lag, elasticity) -> wheel_stats of the window's\n"
      "samples whose forgetting weight (scratch row 2, from fit_window) exceeds threshold"},
-    {"peak_report", py_peak_report, METH_VARARGS,
+    {"peak_report", (PyCFunction)(void (*)(void))py_peak_report, METH_FASTCALL,
      "peak_report(wheel_mu, wheel_lam, support, slip_floor, peak_extrapolation, extrapolation_max_slip, thetas,\n"
      "            v, params, (sc4, sc5, sc6), cov_unit,\n"
      "            variance_factor, share) -> (wheel_mu, wheel_lam, capped, mu_max, slip_star, mu_std, wheel_std)"},

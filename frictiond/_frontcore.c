@@ -758,15 +758,20 @@ static PyObject *make_result(PyObject *result_type, PyObject *sample, PyObject *
 /* sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,
  *                wheel_times, torque_weights, ref, ref_fresh) -> FrontEndResult
  * types: (PhysicalSample, FrontEndResult, the six fault messages). */
-static PyObject *py_sample_physics(PyObject *self, PyObject *args)
+static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
     PyObject *fe, *o_k, *types, *o_omega, *o_omega_dot, *inputs, *stale, *lookups, *o_times, *o_weights, *o_ref;
     double t_c, ref = 0.0;
     int glitch, ref_fresh;
-    if (!PyArg_ParseTuple(args, "OO!O!dOOpO!OO!OOOp:sample_physics", &fe, &PyTuple_Type, &o_k, &PyTuple_Type, &types,
-                          &t_c, &o_omega, &o_omega_dot, &glitch, &PyTuple_Type, &inputs, &stale, &PyTuple_Type,
-                          &lookups, &o_times, &o_weights, &o_ref, &ref_fresh))
+    /* (METH_FASTCALL: converted here, once per trigger, without a format string) */
+    if (!arg_count("sample_physics", nargs, 14))
+        return NULL;
+    fe = args[0], o_k = args[1], types = args[2], o_omega = args[4], o_omega_dot = args[5], inputs = args[7];
+    stale = args[8], lookups = args[9], o_times = args[10], o_weights = args[11], o_ref = args[12];
+    if (!arg_type(o_k, &PyTuple_Type, "constants") || !arg_type(types, &PyTuple_Type, "types")
+        || !arg_double(args[3], &t_c) || !arg_bool(args[6], &glitch) || !arg_type(inputs, &PyTuple_Type, "inputs")
+        || !arg_type(lookups, &PyTuple_Type, "matched_lookups") || !arg_bool(args[13], &ref_fresh))
         return NULL;
     if (PyTuple_GET_SIZE(o_k) != K_COUNT || PyTuple_GET_SIZE(types) != 8) {
         PyErr_SetString(PyExc_ValueError, "sample_physics: wrong number of constants or types");
@@ -1029,7 +1034,7 @@ static PyMethodDef methods[] = {
     {"values_at", py_values_at, METH_VARARGS,
      "values_at(lookups, t) -> tuple: for each (series dict, name) of lookups (or None), what\n"
      "_MessageHistory.value_at(t, name) gives: None when the signal has no series yet."},
-    {"sample_physics", py_sample_physics, METH_VARARGS,
+    {"sample_physics", (PyCFunction)(void (*)(void))py_sample_physics, METH_FASTCALL,
      "sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,\n"
      "wheel_times, torque_weights, ref, ref_fresh) -> FrontEndResult: FrontEnd._compute_sample after the\n"
      "fit and the inputs, reading and updating the FrontEnd's state attributes."},

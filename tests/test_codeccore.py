@@ -186,6 +186,18 @@ def test_output_frames_are_the_same_on_both_paths(tmp_path, wheel_spare):
         assert compiled.encode_estimate(estimate) == floats.encode_estimate(estimate)
         assert compiled.encode_wheels(estimate, sample) == floats.encode_wheels(estimate, sample)
         assert compiled._counters == floats._counters
+    # encode_wheels converts its arguments by hand (METH_FASTCALL): each wrong one is refused.
+    good = [compiled._wheel_specs, compiled.wheel_message.length, compiled.wheel_id, 3,
+            compiled._counter_bit[compiled.wheel_id], (0.1,) * 4, (0.5,) * 4, (0.9,) * 4, (3000.0,) * 4,
+            compiled._extra_values[compiled.wheel_id]]
+    assert len(core.encode_wheels(*good)) == 4
+    for k, wrong in ((0, list(good[0])), (1, 8.0), (2, "id"), (3, 1.5), (4, None), (9, [])):
+        bad = list(good)
+        bad[k] = wrong
+        with pytest.raises(TypeError):
+            core.encode_wheels(*bad)
+    with pytest.raises(TypeError, match="10 arguments"):
+        core.encode_wheels(*good[:-1])
 
 
 def _decode_both(compiled, floats, frame):

@@ -306,6 +306,17 @@ def test_compiled_peak_report_matches_numpy():
         for flag in c[2]:
             capped_seen[flag] += 1
     assert capped_seen[True] > 50 and capped_seen[False] > 50
+    # Its arguments are converted by hand (METH_FASTCALL): each wrong one is refused, none crashes.
+    good = [*args, tm.compiled_params(p), *tail]
+    for k, wrong in ((4, "2.0"), (7, None), (8, tm.compiled_params(p)[:6]), (8, "params"), (9, (1.0, 0.5)),
+                     (10, [0.0] * 7), (11, []), (0, [0.1] * 3)):
+        bad = list(good)
+        bad[k] = wrong
+        with pytest.raises((TypeError, ValueError)):
+            core.peak_report(*bad)
+    with pytest.raises(TypeError, match="13 arguments"):
+        core.peak_report(*good[:-1])
+    assert core.peak_report(*good) == c
 
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
@@ -412,10 +423,19 @@ def test_append_instant_fills_the_window_as_append_does():
         for name in ("slip", "speed", "mu", "time", "wheel", "lam_v", "pow_lam_v", "stiff"):
             np.testing.assert_array_equal(getattr(compiled, name)[compiled.start:compiled.end],
                                           getattr(floats, name)[floats.start:floats.end], err_msg=name)
+    columns = (compiled.slip, compiled.speed, compiled.mu, compiled.time, compiled.wheel, compiled.lam_v,
+               compiled.pow_lam_v, compiled.stiff)
     with pytest.raises(IndexError):
-        core.append_samples((compiled.slip, compiled.speed, compiled.mu, compiled.time, compiled.wheel, compiled.lam_v,
-                             compiled.pow_lam_v, compiled.stiff), 63, [0.1, 0.1], 10.0, [0.5, 0.5], 1.0, [0, 1],
-                            0.5, 0.2, 0.98)
+        core.append_samples(columns, 63, [0.1, 0.1], 10.0, [0.5, 0.5], 1.0, [0, 1], 0.5, 0.2, 0.98)
+    # Its arguments are converted by hand (METH_FASTCALL): each wrong one is refused.
+    good = [columns, 0, [0.1], 10.0, [0.5], 1.0, [0], 0.5, 0.2, 0.98]
+    for k, wrong in ((0, list(columns)), (0, columns[:7]), (1, 0.0), (3, "10"), (5, None), (9, [0.98])):
+        bad = list(good)
+        bad[k] = wrong
+        with pytest.raises(TypeError):
+            core.append_samples(*bad)
+    with pytest.raises(TypeError, match="10 arguments"):
+        core.append_samples(*good[:-1])
 
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")

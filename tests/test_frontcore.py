@@ -269,6 +269,15 @@ def test_sample_physics_refuses_what_it_cannot_read():
         core.sample_physics(*args[:7], (0.0,) * 3, *args[8:])
     with pytest.raises(ValueError, match="four"):
         core.sample_physics(*args[:4], [80.0] * 3, *args[5:])
+    # Its arguments are converted by hand (METH_FASTCALL): each wrong one is refused.
+    for k, wrong in ((1, list(args[1])), (2, None), (3, "1.0"), (7, list(args[7])), (9, list(args[9]))):
+        bad = list(args)
+        bad[k] = wrong
+        with pytest.raises(TypeError):
+            core.sample_physics(*bad)
+    with pytest.raises(TypeError, match="14 arguments"):
+        core.sample_physics(*args[:-1])
+    assert core.sample_physics(*args[:6], 1, *args[7:13], "yes").sample is not None   # ("p": any truth value)
     fe._dead = [False] * 3
     with pytest.raises(TypeError, match="_dead"):
         core.sample_physics(*args)

@@ -164,7 +164,8 @@ def _candump_lines(text: str, keep_ids: frozenset[int] | None
                 if keep_ids is not None and not extended and can_id not in keep_ids:
                     skipped += 1
                 else:
-                    items.append(new_frame(Frame, (time_s, can_id, bytes.fromhex(data), extended, False, False)))
+                    items.append(new_frame(Frame, (time_s, can_id & 0x1FFFFFFF, bytes.fromhex(data), extended, False,
+                                                             False)))
                 continue
         if line.strip():
             any_frame_line = True

@@ -33,6 +33,7 @@ EDGE_LINES = [
     "(13." + "1" * 80 + ") vcan0 123#11",          # a time longer than the parser's buffer
     "(14.000000) 0 123#11",                        # a numeric channel
     "(15.000000) vcan0 123#" + "11" * 64,          # 64 data bytes (FD length without the FD marker)
+    "(16.000000) vcan0 80000123#11",               # flag bits above the 29-bit ID (masked off)
 ]
 
 

@@ -41,3 +41,16 @@ def edited_dbc(tmp_path: Path, *edits: tuple[str, str]) -> Path:
     path = tmp_path / "out.dbc"
     path.write_text(text)
     return path
+
+
+def assert_each_refused(call, good: list, wrongs, errors=TypeError) -> None:
+    """A compiled function's own argument checks (METH_FASTCALL): `call(*good)` with one argument
+    at a time replaced, as (index, wrong value) in `wrongs`, raises one of `errors`; without its
+    last argument, a TypeError that names the count."""
+    with pytest.raises(TypeError, match=f"{len(good)} arguments"):
+        call(*good[:-1])
+    for k, wrong in wrongs:
+        bad = list(good)
+        bad[k] = wrong
+        with pytest.raises(errors):
+            call(*bad)

@@ -11,6 +11,8 @@ from frictiond import tyre_model as tm
 from frictiond.estimator import LugreTrustRegionEstimator
 from frictiond.samples import Status
 
+from .conftest import assert_each_refused
+
 from .test_estimator import braking, lugre_curve
 
 core = estimator_module.compiled_fit
@@ -308,14 +310,9 @@ def test_compiled_peak_report_matches_numpy():
     assert capped_seen[True] > 50 and capped_seen[False] > 50
     # Its arguments are converted by hand (METH_FASTCALL): each wrong one is refused, none crashes.
     good = [*args, tm.compiled_params(p), *tail]
-    for k, wrong in ((4, "2.0"), (7, None), (8, tm.compiled_params(p)[:6]), (8, "params"), (9, (1.0, 0.5)),
-                     (10, [0.0] * 7), (11, []), (0, [0.1] * 3)):
-        bad = list(good)
-        bad[k] = wrong
-        with pytest.raises((TypeError, ValueError)):
-            core.peak_report(*bad)
-    with pytest.raises(TypeError, match="13 arguments"):
-        core.peak_report(*good[:-1])
+    assert_each_refused(core.peak_report, good,
+                        ((4, "2.0"), (7, None), (8, tm.compiled_params(p)[:6]), (8, "params"), (9, (1.0, 0.5)),
+                         (10, [0.0] * 7), (11, []), (0, [0.1] * 3)), (TypeError, ValueError))
     assert core.peak_report(*good) == c
 
 
@@ -429,13 +426,8 @@ def test_append_instant_fills_the_window_as_append_does():
         core.append_samples(columns, 63, [0.1, 0.1], 10.0, [0.5, 0.5], 1.0, [0, 1], 0.5, 0.2, 0.98)
     # Its arguments are converted by hand (METH_FASTCALL): each wrong one is refused.
     good = [columns, 0, [0.1], 10.0, [0.5], 1.0, [0], 0.5, 0.2, 0.98]
-    for k, wrong in ((0, list(columns)), (0, columns[:7]), (1, 0.0), (3, "10"), (5, None), (9, [0.98])):
-        bad = list(good)
-        bad[k] = wrong
-        with pytest.raises(TypeError):
-            core.append_samples(*bad)
-    with pytest.raises(TypeError, match="10 arguments"):
-        core.append_samples(*good[:-1])
+    assert_each_refused(core.append_samples, good,
+                        ((0, list(columns)), (0, columns[:7]), (1, 0.0), (3, "10"), (5, None), (9, [0.98])))
 
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
@@ -499,15 +491,10 @@ def test_fit_window_is_weights_solve_and_bias_on_the_window(trim):
     good = [w.core_columns, lo, hi, now, tau, sigma, jump_t, x0.copy(), est._lb, est._ub, est._prior,
             est._inv_prior_std, est._tie_rel_d, c_gradient, c_normal, est._core_constants, 0.5, 8, 1e-6, 1e-6, 1e-8,
             1e-3, 4, x0, 0]
-    for k, wrong in ((0, list(w.core_columns)), (1, 1.5), (2, "9"), (3, "now"), (15, est._core_constants[:5]),
-                     (15, list(est._core_constants)), (16, None), (17, 2.0), (17, 1 << 40), (22, "4"), (24, 0.0),
-                     (7, [0.0] * 7), (23, x0.astype(np.float32))):
-        args = list(good)
-        args[k] = wrong
-        with pytest.raises((TypeError, ValueError, OverflowError)):
-            core.fit_window(*args)
-    with pytest.raises(TypeError, match="25 arguments"):
-        core.fit_window(*good[:-1])
+    assert_each_refused(core.fit_window, good,
+                        ((0, list(w.core_columns)), (1, 1.5), (2, "9"), (3, "now"), (15, est._core_constants[:5]),
+                         (15, list(est._core_constants)), (16, None), (17, 2.0), (17, 1 << 40), (22, "4"),
+                         (24, 0.0), (7, [0.0] * 7), (23, x0.astype(np.float32))), (TypeError, ValueError, OverflowError))
     assert core.fit_window(*good)[3] == first   # (the good arguments still work)
 
 

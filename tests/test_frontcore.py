@@ -12,6 +12,8 @@ from frictiond.config import default_config_path, load_config
 from frictiond.pipeline import Pipeline
 from frictiond.sim_frames import simulate_frames
 
+from .conftest import assert_each_refused
+
 core = frontend_module.compiled_front
 needs_core = pytest.mark.skipif(core is None, reason="not built (test_the_compiled_front_end_is_built fails instead)")
 
@@ -159,13 +161,7 @@ def test_history_push_is_the_same_on_both_paths():
     assert all(ts.maxlen == 16 for ts, _ in compiled.series.values())
     # push_values converts its arguments itself (METH_FASTCALL): wrong ones are refused.
     good = [compiled.series, compiled.merged, t + 1.0, {"a": 1.0}, frontend_module._new_series]
-    for k, wrong in ((0, []), (1, None), (2, 1), (3, [("a", 1.0)])):
-        args = list(good)
-        args[k] = wrong
-        with pytest.raises(TypeError):
-            core.push_values(*args)
-    with pytest.raises(TypeError, match="5 arguments"):
-        core.push_values(*good[:4])
+    assert_each_refused(core.push_values, good, ((0, []), (1, None), (2, 1), (3, [("a", 1.0)])))
     assert core.push_values(*good) is None and compiled.merged["a"] == 1.0
 
 
@@ -270,13 +266,8 @@ def test_sample_physics_refuses_what_it_cannot_read():
     with pytest.raises(ValueError, match="four"):
         core.sample_physics(*args[:4], [80.0] * 3, *args[5:])
     # Its arguments are converted by hand (METH_FASTCALL): each wrong one is refused.
-    for k, wrong in ((1, list(args[1])), (2, None), (3, "1.0"), (7, list(args[7])), (9, list(args[9]))):
-        bad = list(args)
-        bad[k] = wrong
-        with pytest.raises(TypeError):
-            core.sample_physics(*bad)
-    with pytest.raises(TypeError, match="14 arguments"):
-        core.sample_physics(*args[:-1])
+    assert_each_refused(core.sample_physics, args,
+                        ((1, list(args[1])), (2, None), (3, "1.0"), (7, list(args[7])), (9, list(args[9]))))
     assert core.sample_physics(*args[:6], 1, *args[7:13], "yes").sample is not None   # ("p": any truth value)
     fe._dead = [False] * 3
     with pytest.raises(TypeError, match="_dead"):

@@ -555,8 +555,11 @@ class LugreTrustRegionEstimator:
             self._load_share = [f / total_load for f in loads]
         scales = None
         slips, mus, wheels = [], [], []
-        for i, (slip, usable, mu_used) in enumerate(zip(sample.slip, sample.usable, sample.mu_used)):
-            if usable and slip >= o.min_slip and math.isfinite(mu_used):
+        min_slip, isfinite, usable = o.min_slip, math.isfinite, sample.usable
+        wheel_slips, wheel_mus = sample.slip, sample.mu_used
+        for i in range(N_WHEELS):   # (indexing the four wheels: no zip/enumerate tuples per update)
+            slip, mu_used = wheel_slips[i], wheel_mus[i]
+            if usable[i] and slip >= min_slip and isfinite(mu_used):
                 if scales is None:
                     scales = self._axle_scales()
                 slips.append(slip)

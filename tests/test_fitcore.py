@@ -43,6 +43,16 @@ def _window_problem(theta=2.0, seed=4, duration=0.6):
     return est, sw
 
 
+def _with_samples_at_the_end(est, slips, mus, speed=20.0):
+    """Append samples (wheels in turn) at the window's last instant; the rows' weights √w/σ after it."""
+    w = est._window
+    t_last = float(w.time[w.end - 1])
+    for k, (slip, mu) in enumerate(zip(slips, mus)):
+        w.append(slip, speed, mu, t_last, k % 4)
+    est._cache_x = None   # (the numpy path would reuse its rows from before the additions)
+    return np.sqrt(est._weights(t_last, w.view()[3])) / est.options.measurement_std
+
+
 def _compiled_normal(est, x, sw):
     """One evaluation of the compiled normal equations (zero iterations)."""
     w = est._window
@@ -64,12 +74,8 @@ def test_compiled_normal_equations_match_numpy(offset):
     # The compiled rows take 1 − e^−Z by expm1 up to Z = 0.5 and by exp beyond: braking data
     # lie beyond, so a few samples at small slip (rolling, light braking) join the window and
     # the comparison holds both.
+    sw = _with_samples_at_the_end(est, [2e-4 * (k + 1) for k in range(12)], [0.01 * (k + 1) for k in range(12)])
     w = est._window
-    t_last = float(w.time[w.end - 1])
-    for k in range(12):
-        w.append(2e-4 * (k + 1), 20.0, 0.01 * (k + 1), t_last, k % 4)
-    sw = np.sqrt(est._weights(t_last, w.view()[3])) / est.options.measurement_std
-    est._cache_x = None   # (the numpy path would reuse its rows from before the additions)
     p = est._params(x)
     g = tm._stribeck(w.lam_v[w.start:w.end], p)[0]
     Z = np.exp(x[:4])[w.wheel[w.start:w.end]] * p.sigma0 * w.stiff[w.start:w.end] / g
@@ -89,13 +95,8 @@ def test_compiled_normal_equations_match_numpy(offset):
 def test_compiled_normal_equations_use_the_series_near_zero_slip():
     # Samples at tiny slip put Z below tyre_model._SMALL_Z, where the closed form of F loses digits.
     est, _ = _window_problem()
+    sw = _with_samples_at_the_end(est, [1e-7 * (k + 1) for k in range(8)], [0.001] * 8)
     w = est._window
-    t_last = float(w.time[w.end - 1])
-    for k in range(8):
-        w.append(1e-7 * (k + 1), 20.0, 0.001, t_last, k % 4)
-    times = w.view()[3]
-    sw = np.sqrt(est._weights(t_last, times)) / est.options.measurement_std
-    est._cache_x = None   # (the numpy path would reuse its rows from before the additions)
     x = est._x.copy()
     assert float((np.exp(x[:4]).max() * x[4] * est._shared_scale[0]) * w.stiff[w.end - 1] / 0.8) < tm._SMALL_Z
     cost, grad, normal, extra = est._normal(x, sw)

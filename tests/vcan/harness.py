@@ -24,9 +24,10 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[2]
 GUEST_SCRIPT = Path(__file__).resolve().parent / "guest.py"
+XSTATE_SHIM = Path(__file__).resolve().parent / "uml_xstate_shim.c"
 UML_KERNEL = "linux.uml"
 GUEST_TOOLS = ("canplayer", "candump", "cangen", "ip")
-APT_HINT = "apt-get install -y user-mode-linux can-utils kmod iproute2"
+APT_HINT = "apt-get install -y user-mode-linux can-utils kmod iproute2 gcc libc6-dev"
 MAX_LOG_SECONDS = 6.0
 STALE_CUT_S = 2.0            # BRAKE_PRESSURES stops this long after the start in stale.log
 PRESSURE_ID = 0xD0
@@ -56,6 +57,8 @@ def missing_tools() -> list[str]:
             missing.append(UML_KERNEL)
         if shutil.which("insmod") is None:
             missing.append("insmod")
+        if shutil.which("gcc") is None:
+            missing.append("gcc")   # (builds the XSAVE shim UML needs on AVX-512/AMX hosts)
         if uml_module_dir() is None:
             missing.append("UML CAN modules")
     return missing
@@ -141,6 +144,13 @@ halt -f
     return script
 
 
+def _build_xstate_shim(out: Path) -> Path:
+    """The LD_PRELOAD library that lets UML run on hosts with AVX-512/AMX (see its source)."""
+    lib = out / "uml_xstate_shim.so"
+    subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-o", str(lib), str(XSTATE_SHIM), "-ldl"], check=True)
+    return lib
+
+
 def run_suite(out: Path, timeout_s: float = 290.0) -> dict:
     """Prepare, run the live part (host vcan0 or UML), and return the guest's results.json."""
     missing = missing_tools()
@@ -160,11 +170,12 @@ def run_suite(out: Path, timeout_s: float = 290.0) -> dict:
     else:
         mode = "user-mode Linux"
         init = _guest_init(out, uml_module_dir())
+        env = dict(os.environ, LD_PRELOAD=str(_build_xstate_shim(out)))
         with open(out / "console.log", "w") as console:
             subprocess.run(
                 [UML_KERNEL, "mem=1G", "rootfstype=hostfs", "rootflags=/", "rw", f"init={init}", "con=null",
                  "con0=fd:0,fd:1"],
-                stdin=subprocess.DEVNULL, stdout=console, stderr=subprocess.STDOUT, timeout=timeout_s,
+                stdin=subprocess.DEVNULL, stdout=console, stderr=subprocess.STDOUT, timeout=timeout_s, env=env,
             )
     elapsed = time.monotonic() - started
     if not status_file.exists():

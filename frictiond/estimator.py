@@ -96,6 +96,8 @@ class LugreTROptions:
     excitation_slip_ratio: float = 0.75   # slip must have reached this fraction of λ*
     excitation_mu_ratio: float = 0.85     # ... or the utilised μ this fraction of μ_max
     excitation_min_slip: float = 0.015    # no road peaks below this slip; smaller excursions prove nothing
+    excitation_min_sliding_mps: float = 0.06  # ... nor slips whose sliding speed λ·v is a few wheel-speed quanta
+    peak_evidence_speed_ratio: float = 0.6    # a peak seen at speed v is evidence down to this × v
     excitation_slip_rate: float = 0.3     # 1/s: a stop's first evidence of the peak needs a wheel running away
     excitation_relative_slip_rate: float = 5.0   # ... or its slip growing at this many times itself per second
     excitation_runaway_elasticity: float = 0.3   # ... while μ grows by at most this share of the slip's relative growth
@@ -249,12 +251,6 @@ def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: l
 
 _WHEEL_COLUMN = np.arange(N_WHEELS)[:, None]
 _WHEEL_STD_KEYS = tuple(f"wheel_std_{i}" for i in range(N_WHEELS))
-# The excitation's reasons as `_fitcore.excitation_verdicts` gives them (the formatted ones are
-# (format, value) until read), in the order of its W_ constants: those of `_excitation`'s loop.
-_EXCITATION_WHY = ("θ at its bound", "few samples", "slip not running away", "past the peak ({:.2f})",
-                   "no slip spread", "degenerate", "negative secant", "not bending ({:.2f})", "steep secant",
-                   "low utilisation", "no peak", "proximity {:.2f}")
-
 
 class _Window:
     """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append.
@@ -384,11 +380,6 @@ class LugreTrustRegionEstimator:
         self._runaway_lag = max(2, round(0.05 / sample_period_s))
         # The forgetting weight of a sample `excitation_window_s` old: newer ones are "recent".
         self._recent_threshold = math.exp(-o.excitation_window_s / o.forgetting_time_constant)
-        # `_fitcore.excitation_verdicts`' settings, in the order of its X_ constants.
-        self._excitation_constants = tuple(float(v) for v in (
-            self._min_wheel_samples, o.excitation_slip_rate, o.excitation_relative_slip_rate, o.excitation_min_slip,
-            o.min_utilisation, o.max_peak_secant, o.excitation_slip_ratio, o.excitation_fit_ratio,
-            o.excitation_mu_ratio, MAX_MODEL_SLIP))
         # Room for a whole window at twice the expected rate, four wheels a sample (a window
         # that outgrows it loses its oldest quarter); bounded so that a window_s of hours does not
         # preallocate gigabytes.
@@ -460,7 +451,7 @@ class LugreTrustRegionEstimator:
         self._capped: np.ndarray | None = None
         self._slip_floor = [0.0] * N_WHEELS
         self._excited_since_s = math.inf
-        self._peak_seen = False
+        self._peak_seen_speed = 0.0
         self._last_fit_s = -math.inf
         self._last_update_s: float | None = None
         self._cov_unit: np.ndarray | None = None
@@ -483,7 +474,7 @@ class LugreTrustRegionEstimator:
         self._capped = None
         self._mu_history.clear()
         self._excited_since_s = math.inf
-        self._peak_seen = False
+        self._peak_seen_speed = 0.0
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
@@ -702,7 +693,7 @@ class LugreTrustRegionEstimator:
             self._last_excited_s = -math.inf
             self._excitation_cache = None
             self._mu_history.clear()
-            # (`_peak_seen` stays: the stop is still in ABS, only on another road; a wheel held
+            # (`_peak_seen_speed` stays: the stop is still in ABS, only on another road; a wheel held
             # past the new fit's peak is evidence of it as much as of the old one's.)
 
     def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
@@ -1174,17 +1165,15 @@ class LugreTrustRegionEstimator:
         best = 0.0
         why = self._excitation_why = ["", "", "", ""]
         fit_at_hi = self._fit_at_high_slip(speed)
+        # The peak, once seen in this stop, describes the road at the speed it was seen at: the
+        # peak moves with speed (more grip at walking pace on most roads), so a wheel "held past
+        # it" at a much lower speed proves nothing until the data show the peak there again.
+        peak_seen = (self._peak_seen_speed > 0.0
+                     and speed >= o.peak_evidence_speed_ratio * self._peak_seen_speed)
+        best_fresh = 0.0
         # A θ held at its bound is not where the data put it: its peak proves nothing.
         at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
                     zip(self._floats_of_x()[0][:N_WHEELS], self._theta_bounds)]
-        if self.core is not None:
-            # The loop below, compiled (`_fitcore.excitation_verdicts`, the same reasons).
-            verdicts = self.core.excitation_verdicts(wheel_stats, at_bound, self._peak_seen, wheel_mu, wheel_lam,
-                                                     fit_at_hi, self._capped, self._excitation_constants,
-                                                     _EXCITATION_WHY)
-            if verdicts is not None:
-                excitation, self._peak_seen, self._excitation_why = verdicts
-                return excitation
         for i in range(N_WHEELS):
             if at_bound[i]:
                 why[i] = "θ at its bound"
@@ -1193,7 +1182,7 @@ class LugreTrustRegionEstimator:
             if n < self._min_wheel_samples:
                 why[i] = "few samples"
                 continue
-            if not self._peak_seen:
+            if not peak_seen:
                 # Over its peak a tyre gives no more force as the brake torque rises: the wheel
                 # runs away into slip (ABS exists to catch this). Steady braking, however bent its
                 # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
@@ -1207,10 +1196,16 @@ class LugreTrustRegionEstimator:
                 if not runaway_rate >= needed:
                     why[i] = "slip not running away"
                     continue
+            if lam_hi * speed < o.excitation_min_sliding_mps:
+                # Slip is a speed difference over the speed: at walking pace a few quanta of the
+                # wheel-speed signals (0.01–0.06 km/h each) and the speed estimate's error make
+                # several % of slip. A sliding speed that small is not measured, whatever the ratio.
+                why[i] = "sliding too slow"
+                continue
             if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
                 # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
                 # ice): the shape of the curve near its peak is not observed ...
-                if (self._peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= float(wheel_lam[i])
+                if (peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= float(wheel_lam[i])
                         and mu_hi >= o.min_utilisation * float(wheel_mu[i])):
                     # ... unless this stop's data have shown the peak already and the wheel now
                     # stays past it, using the grip the fit says is there (ABS holding a wheel
@@ -1263,9 +1258,11 @@ class LugreTrustRegionEstimator:
                 continue  # no peak short of lock, and the data far below the fitted maximum
             why[i] = ("proximity {:.2f}", proximity)
             best = max(best, proximity)
+            best_fresh = max(best_fresh, proximity)
         if best < o.excitation_slip_ratio:
             return 0.0
-        self._peak_seen = True
+        if best_fresh >= o.excitation_slip_ratio:
+            self._peak_seen_speed = speed
         return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
 
     def _hold(self, now_s: float, speed: float, fitted: tuple | None = None) -> FrictionEstimate:

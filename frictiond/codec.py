@@ -40,6 +40,8 @@ _QUANTITY = {
     **{n: "pressure" for n in REQUIRED_INPUTS if n.startswith("brake_pressure")},
     "vehicle_speed_ref": "speed",
     **{n: "torque" for n in OPTIONAL_INPUTS if n.startswith("drive_torque")},
+    "brake_pressure_master": "pressure",
+    **{n: "flag" for n in OPTIONAL_INPUTS if n.startswith("abs_active")},
 }
 _DEG = math.pi / 180.0
 _UNITS: dict[str, dict[str, float | None]] = {
@@ -52,10 +54,11 @@ _UNITS: dict[str, dict[str, float | None]] = {
     "pressure": {"bar": 1.0, "mbar": 1e-3, "kpa": 0.01, "mpa": 10.0, "pa": 1e-5, "psi": 0.0689475729},
     "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704},
     "torque": {"n.m": 1.0, "nm": 1.0, "n*m": 1.0, "n·m": 1.0, "knm": 1000.0},
+    "flag": {"1": 1.0, "-": 1.0, "bool": 1.0, "on/off": 1.0},
 }
 _GROUND_SPEED = {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704}
 CANONICAL_UNIT = {"wheel_speed": "rad/s", "acceleration": "m/s^2", "angular_rate": "rad/s",
-                  "pressure": "bar", "speed": "m/s", "torque": "N.m"}
+                  "pressure": "bar", "speed": "m/s", "torque": "N.m", "flag": "1"}
 
 
 class DecodeFailure(Exception):

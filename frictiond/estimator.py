@@ -452,6 +452,7 @@ class LugreTrustRegionEstimator:
         self._slip_floor = [0.0] * N_WHEELS
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
+        self._abs_seen_s = [-math.inf] * N_WHEELS
         self._last_fit_s = -math.inf
         self._last_update_s: float | None = None
         self._cov_unit: np.ndarray | None = None
@@ -548,6 +549,11 @@ class LugreTrustRegionEstimator:
         slips, mus, wheels = [], [], []
         min_slip, isfinite, usable = o.min_slip, math.isfinite, sample.usable
         wheel_slips, wheel_mus = sample.slip, sample.mu_used
+        abs_active = sample.abs_active
+        if abs_active[0] or abs_active[1] or abs_active[2] or abs_active[3]:
+            for i in range(N_WHEELS):
+                if abs_active[i]:
+                    self._abs_seen_s[i] = t
         for i in range(N_WHEELS):   # (indexing the four wheels: no zip/enumerate tuples per update)
             slip, mu_used = wheel_slips[i], wheel_mus[i]
             if usable[i] and slip >= min_slip and isfinite(mu_used):
@@ -1149,121 +1155,132 @@ class LugreTrustRegionEstimator:
         excitation by moving its peak onto the data (constant-slip braking would do that):
         (1) the data come near the fitted peak (slip ≥ `excitation_slip_ratio`·λ*, or utilised μ
             near μ_max), and
-        (2) the data themselves bend over: a through-origin quadratic μ ≈ aλ + bλ² fitted to the
+        (2) the wheel is at its limit by a measure that does not come from the fit: an ABS works
+            the wheel (its controller released it at the peak: `abs_activity`), or the data
+            themselves bend over — a through-origin quadratic μ ≈ aλ + bλ² fitted to the
             wheel's recent samples has, at the high-slip end, a tangent slope below half its
-            secant slope — the μ–slip relation has flattened, which a linear region never does;
-        and, until this stop has shown its peak once, (3) the wheel ran away into slip, its
-        force no longer following: firm braking below the peak bends the data too (tyre curves
-        bend well before their peak).
+            secant slope, which a linear region never does — and, until this stop has shown its
+            peak once, the wheel ran away into slip, its force no longer following (firm braking
+            below the peak bends the data too: tyre curves bend well before their peak).
         Once shown, a wheel held past the fitted peak at its grip stays excited (ABS holding
-        an ice plateau at nearly constant slip, where (2) has no spread to work on).
+        an ice plateau at nearly constant slip, where the bending has no spread to work on).
         """
         o = self.options
         # Only the newest ABS cycles count: after a change of road the older samples describe
         # the old one.
         wheel_stats = self._wheel_stats(weights)
-        best = 0.0
-        why = self._excitation_why = ["", "", "", ""]
         fit_at_hi = self._fit_at_high_slip(speed)
         # The peak, once seen in this stop, describes the road at the speed it was seen at: the
         # peak moves with speed (more grip at walking pace on most roads), so a wheel "held past
         # it" at a much lower speed proves nothing until the data show the peak there again.
         peak_seen = (self._peak_seen_speed > 0.0
                      and speed >= o.peak_evidence_speed_ratio * self._peak_seen_speed)
-        best_fresh = 0.0
         # A θ held at its bound is not where the data put it: its peak proves nothing.
         at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
                     zip(self._floats_of_x()[0][:N_WHEELS], self._theta_bounds)]
+        best = best_fresh = 0.0
+        why = self._excitation_why = ["", "", "", ""]
         for i in range(N_WHEELS):
             if at_bound[i]:
                 why[i] = "θ at its bound"
                 continue
-            n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = wheel_stats[i]
-            if n < self._min_wheel_samples:
-                why[i] = "few samples"
-                continue
-            if not peak_seen:
-                # Over its peak a tyre gives no more force as the brake torque rises: the wheel
-                # runs away into slip (ABS exists to catch this). Steady braking, however bent its
-                # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
-                # release bends them more), moves the slip slowly.
-                # Growth over ~50 ms (`_runaway_lag` samples): beyond the slip noise, within an ABS
-                # cycle; and the force no longer following it: Δμ/μ ≤ elasticity·Δλ/λ. The pedal
-                # applied briskly moves the slip as fast in the linear region (0.3 /s at 65 % of
-                # the grip on wet), but there μ rises in proportion.
-                # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
-                needed = min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi)
-                if not runaway_rate >= needed:
-                    why[i] = "slip not running away"
-                    continue
-            if lam_hi * speed < o.excitation_min_sliding_mps:
-                # Slip is a speed difference over the speed: at walking pace a few quanta of the
-                # wheel-speed signals (0.01–0.06 km/h each) and the speed estimate's error make
-                # several % of slip. A sliding speed that small is not measured, whatever the ratio.
-                why[i] = "sliding too slow"
-                continue
-            if lam_hi < o.excitation_min_slip or (lam_hi - lam_lo) < 0.3 * lam_hi:
-                # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
-                # ice): the shape of the curve near its peak is not observed ...
-                if (peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= float(wheel_lam[i])
-                        and mu_hi >= o.min_utilisation * float(wheel_mu[i])):
-                    # ... unless this stop's data have shown the peak already and the wheel now
-                    # stays past it, using the grip the fit says is there (ABS holding a wheel
-                    # on an ice plateau): the peak is still being used, not left behind.
-                    why[i] = ("past the peak ({:.2f})", lam_lo / float(wheel_lam[i]))
-                    best = max(best, 1.0)
-                    continue
-                why[i] = "no slip spread"
-                continue
-            det = s2 * s4 - s3 * s3
-            if det <= 1e-18 * max(s2 * s4, 1e-300):
-                why[i] = "degenerate"
-                continue
-            a = (y1 * s4 - y2 * s3) / det
-            b = (s2 * y2 - s3 * y1) / det
-            secant = a + b * lam_hi
-            if secant <= 0:
-                why[i] = "negative secant"
-                continue
-            bending = (a + 2 * b * lam_hi) / secant
-            if bending > 0.5:
-                why[i] = ("not bending ({:.2f})", bending)
-                continue
-            if mu_hi > o.max_peak_secant * lam_hi:
-                # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
-                # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
-                why[i] = "steep secant"
-                continue
-            # How close to the fitted peak the data came: in slip, in measured μ, and in the
-            # fitted curve's own height at the data's high slip (on a flat-topped road the
-            # peak slip is ill-defined but μ_max is not: the curve is already at its plateau).
-            fit_ratio = float(fit_at_hi[i]) / max(float(wheel_mu[i]), 1e-6)
-            by_plateau = o.excitation_slip_ratio + (fit_ratio - o.excitation_fit_ratio) / (
-                1.0 - o.excitation_fit_ratio) * (1.0 - o.excitation_slip_ratio)
-            if self._capped is not None and self._capped[i]:
-                # μ_max was read at the extrapolation limit, not at a peak: only a plateau
-                # (the fitted curve already flat where the data are) counts as evidence.
-                proximity = by_plateau
-            else:
-                proximity = max(lam_hi / float(wheel_lam[i]),
-                                mu_hi / float(wheel_mu[i]) * o.excitation_slip_ratio / o.excitation_mu_ratio,
-                                by_plateau)
-            if mu_hi < o.min_utilisation * float(wheel_mu[i]):
-                # The measured utilisation never came near the claimed peak: whatever the fit
-                # says beyond the data is extrapolation.
-                why[i] = "low utilisation"
-                continue
-            if float(wheel_lam[i]) >= 0.9 * MAX_MODEL_SLIP and fit_ratio < o.excitation_fit_ratio:  # (uncapped)
-                why[i] = "no peak"
-                continue  # no peak short of lock, and the data far below the fitted maximum
-            why[i] = ("proximity {:.2f}", proximity)
+            abs_working = self._last_sample_s - self._abs_seen_s[i] <= o.excitation_window_s
+            why[i], proximity, fresh = self._wheel_verdict(
+                wheel_stats[i], float(wheel_mu[i]), float(wheel_lam[i]), float(fit_at_hi[i]),
+                bool(self._capped is not None and self._capped[i]), speed, peak_seen, abs_working)
             best = max(best, proximity)
-            best_fresh = max(best_fresh, proximity)
+            if fresh:
+                best_fresh = max(best_fresh, proximity)
         if best < o.excitation_slip_ratio:
             return 0.0
         if best_fresh >= o.excitation_slip_ratio:
             self._peak_seen_speed = speed
         return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
+
+    def _wheel_verdict(self, stats: tuple[float, ...], mu_star: float, lam_star: float, fit_at_hi: float,
+                       capped: bool, speed: float, peak_seen: bool, abs_working: bool) -> tuple[Any, float, bool]:
+        """One wheel's evidence of its peak: (reason, proximity to the peak, fresh).
+
+        `fresh` is False for the one verdict that only carries earlier evidence on (a wheel held
+        past the peak seen before), True where these data show the peak themselves.
+        """
+        o = self.options
+        n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = stats
+        if n < self._min_wheel_samples:
+            return "few samples", 0.0, True
+        if not peak_seen and not abs_working:
+            # Over its peak a tyre gives no more force as the brake torque rises: the wheel
+            # runs away into slip (ABS exists to catch this). Steady braking, however bent its
+            # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
+            # release bends them more), moves the slip slowly.
+            # Growth over ~50 ms (`_runaway_lag` samples): beyond the slip noise, within an ABS
+            # cycle; and the force no longer following it: Δμ/μ ≤ elasticity·Δλ/λ. The pedal
+            # applied briskly moves the slip as fast in the linear region (0.3 /s at 65 % of
+            # the grip on wet), but there μ rises in proportion.
+            # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
+            needed = min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi)
+            if not runaway_rate >= needed:
+                return "slip not running away", 0.0, True
+        if lam_hi * speed < o.excitation_min_sliding_mps:
+            # Slip is a speed difference over the speed: at walking pace a few quanta of the
+            # wheel-speed signals (0.01–0.06 km/h each) and the speed estimate's error make
+            # several % of slip. A sliding speed that small is not measured, whatever the ratio.
+            return "sliding too slow", 0.0, True
+        spread = lam_hi >= o.excitation_min_slip and (lam_hi - lam_lo) >= 0.3 * lam_hi
+        if not spread and not abs_working:
+            # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
+            # ice): the shape of the curve near its peak is not observed ...
+            if peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star:
+                # ... unless this stop's data have shown the peak already and the wheel now
+                # stays past it, using the grip the fit says is there (ABS holding a wheel
+                # on an ice plateau): the peak is still being used, not left behind.
+                return ("past the peak ({:.2f})", lam_lo / lam_star), 1.0, False
+            return "no slip spread", 0.0, True
+        if not abs_working:
+            bent = self._bending(lam_hi, s2, s3, s4, y1, y2)
+            if bent is not None:
+                return bent, 0.0, True
+        if mu_hi > o.max_peak_secant * lam_hi:
+            # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
+            # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
+            return "steep secant", 0.0, True
+        # How close to the fitted peak the data came: in slip, in measured μ, and in the
+        # fitted curve's own height at the data's high slip (on a flat-topped road the
+        # peak slip is ill-defined but μ_max is not: the curve is already at its plateau).
+        fit_ratio = fit_at_hi / max(mu_star, 1e-6)
+        by_plateau = o.excitation_slip_ratio + (fit_ratio - o.excitation_fit_ratio) / (
+            1.0 - o.excitation_fit_ratio) * (1.0 - o.excitation_slip_ratio)
+        if capped:
+            # μ_max was read at the extrapolation limit, not at a peak: only a plateau
+            # (the fitted curve already flat where the data are) counts as evidence.
+            proximity = by_plateau
+        else:
+            proximity = max(lam_hi / lam_star, mu_hi / mu_star * o.excitation_slip_ratio / o.excitation_mu_ratio,
+                            by_plateau)
+        if mu_hi < o.min_utilisation * mu_star:
+            # The measured utilisation never came near the claimed peak: whatever the fit
+            # says beyond the data is extrapolation.
+            return "low utilisation", 0.0, True
+        if lam_star >= 0.9 * MAX_MODEL_SLIP and fit_ratio < o.excitation_fit_ratio:  # (uncapped)
+            return "no peak", 0.0, True   # no peak short of lock, and the data far below the fitted maximum
+        return ("proximity {:.2f}", proximity), proximity, True
+
+    @staticmethod
+    def _bending(lam_hi: float, s2: float, s3: float, s4: float, y1: float, y2: float) -> Any:
+        """None when the wheel's recent μ–slip data bend over (the through-origin quadratic's
+        tangent at the high slip below half its secant), else why not."""
+        det = s2 * s4 - s3 * s3
+        if det <= 1e-18 * max(s2 * s4, 1e-300):
+            return "degenerate"
+        a = (y1 * s4 - y2 * s3) / det
+        b = (s2 * y2 - s3 * y1) / det
+        secant = a + b * lam_hi
+        if secant <= 0:
+            return "negative secant"
+        bending = (a + 2 * b * lam_hi) / secant
+        if bending > 0.5:
+            return ("not bending ({:.2f})", bending)
+        return None
 
     def _hold(self, now_s: float, speed: float, fitted: tuple | None = None) -> FrictionEstimate:
         """No fresh excitation: keep a recent VALID for `hold_s`, then say NOT_EXCITED."""

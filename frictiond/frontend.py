@@ -34,6 +34,7 @@ try:
 except ImportError:  # pragma: no cover - depends on the install
     compiled_front = None
 
+from .abs_activity import ABS_FLAG_NAMES, MASTER_PRESSURE_NAME, AbsActivity
 from .samples import PhysicalSample
 from .vehicle import GRAVITY_MPS2, VehicleParams
 
@@ -42,7 +43,7 @@ _FL, _FR, _RL, _RR = WHEEL_SPEED_NAMES
 PRESSURE_NAMES = ("brake_pressure_fl", "brake_pressure_fr", "brake_pressure_rl", "brake_pressure_rr")
 DRIVE_TORQUE_NAMES = ("drive_torque_fl", "drive_torque_fr", "drive_torque_rl", "drive_torque_rr")
 REQUIRED_INPUTS = WHEEL_SPEED_NAMES + ("accel_long", "accel_lat") + PRESSURE_NAMES
-OPTIONAL_INPUTS = ("yaw_rate", "vehicle_speed_ref") + DRIVE_TORQUE_NAMES
+OPTIONAL_INPUTS = ("yaw_rate", "vehicle_speed_ref") + DRIVE_TORQUE_NAMES + (MASTER_PRESSURE_NAME,) + ABS_FLAG_NAMES
 
 # Plausibility limits of physical inputs; beyond them a sensor is broken, not the road special.
 MAX_WHEEL_SPEED_RADPS = 400.0
@@ -227,6 +228,10 @@ class FrontEnd:
         self._has_ref_speed = "vehicle_speed_ref" in self._signal_message
         self._has_drive_torque = all(n in self._signal_message for n in DRIVE_TORQUE_NAMES)
         self._has_yaw_rate = "yaw_rate" in self._signal_message
+        self._has_master_pressure = MASTER_PRESSURE_NAME in self._signal_message
+        self._has_abs_flag = "abs_active" in self._signal_message
+        self._has_wheel_abs_flags = any(n in self._signal_message for n in ABS_FLAG_NAMES[1:])
+        self._abs_activity = AbsActivity()
         # The signals each sample reads at the window's centre, fetched in one call
         # (`_values_at`): accelerations, pressures, then the optional drive torques and yaw rate.
         self._sample_inputs = (("accel_long", "accel_lat") + PRESSURE_NAMES
@@ -259,6 +264,7 @@ class FrontEnd:
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
         n = self.derivative_window
+        self._abs_activity.reset()
         self._wheel_times: deque[float] = deque(maxlen=n)
         self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
         self._speed_estimate_mps: float | None = None
@@ -381,7 +387,21 @@ class FrontEnd:
             return FrontEndResult(None, stale, None)
         if stale:
             return FrontEndResult(None, stale, None)
-        return self._compute_sample(stale)
+        result = self._compute_sample(stale)
+        if result.sample is not None:
+            self._mark_abs_activity(result.sample)
+        return result
+
+    def _mark_abs_activity(self, sample: PhysicalSample) -> None:
+        """`sample.abs_active`: the wheels an ABS is working (see `abs_activity`), from the
+        pressures, the master-cylinder pressure and the car's ABS flags at the sample's instant."""
+        t = sample.time_s
+        value = self._value
+        sample.abs_active = self._abs_activity.update(
+            t, tuple([value(n, t) for n in PRESSURE_NAMES]),
+            value(MASTER_PRESSURE_NAME, t) if self._has_master_pressure else None,
+            value("abs_active", t) if self._has_abs_flag else None,
+            tuple([value(n, t) for n in ABS_FLAG_NAMES[1:]]) if self._has_wheel_abs_flags else (None,) * 4)
 
     # -- the physics ---------------------------------------------------------------------------
     def _fit_wheels(self) -> tuple[float, list[float], list[float], bool]:

@@ -44,6 +44,7 @@ class PhysicalSample:
     usable: tuple[bool, bool, bool, bool]   # passed the front end's gates
     braking: bool = False         # brake applied (pressure above push-out) on any wheel
     speed_from_reference: bool = False
+    abs_active: tuple[bool, bool, bool, bool] = (False, False, False, False)   # an ABS works the wheel
 
 
 @dataclass(slots=True)

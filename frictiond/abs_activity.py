@@ -1,0 +1,103 @@
+"""Whether the ABS is working a wheel: evidence, independent of the fit, that the tyre reached its limit.
+
+An ABS releases a wheel's pressure only when its controller judged the wheel at or past the peak
+of its tyre curve (the wheel decelerating faster than the car can, its slip running away). A
+release while the driver keeps the pedal down is therefore an outside observation that the tyre
+worked at its grip limit. It is the only evidence a well-tuned ABS gives: one that catches the
+wheel within a few per cent of slip never lets the slip run away, which is what the estimator
+otherwise waits for before it trusts a first peak.
+
+Two sources; either one marks a wheel:
+- the car's own flags, when the signal map has them: `abs_active` (the ABS is regulating, any
+  wheel) or `abs_active_fl` … `abs_active_rr` (per wheel); a value ≥ 0.5 is "on";
+- the wheel pressures: a wheel's pressure fallen well below its own maximum of the last
+  `window_s` while the driver's demand has not fallen with it. The demand is the master-cylinder
+  pressure (`brake_pressure_master`) when mapped, else the highest wheel pressure now: a
+  four-channel ABS does not release every wheel in the same instant, except on ice, where the
+  slip then runs away and the estimator has that evidence instead. A car that reports only its
+  master-cylinder pressure on every wheel shows no per-wheel release: only its flags count.
+
+A mark lasts `memory_s` (about the estimator's excitation window): the release comes after the
+peak, the evidence is for the samples just before it.
+
+Pure physics on numbers: nothing here knows of CAN or of the tyre model.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+ABS_FLAG_NAMES = ("abs_active", "abs_active_fl", "abs_active_fr", "abs_active_rl", "abs_active_rr")
+MASTER_PRESSURE_NAME = "brake_pressure_master"
+
+NO_ACTIVITY = (False, False, False, False)
+
+
+@dataclass(frozen=True, slots=True)
+class AbsActivityOptions:
+    window_s: float = 0.3            # a wheel's pressure is compared with its own maximum over this
+    min_drop_bar: float = 5.0        # a release: at least this far below that maximum ...
+    min_drop_ratio: float = 0.25     # ... and this share of it
+    min_pressure_bar: float = 10.0   # only where the wheel was braked this hard
+    demand_kept_ratio: float = 0.8   # the driver's demand stays above this share of its own maximum
+    memory_s: float = 0.3            # a mark lasts this long
+
+
+class AbsActivity:
+    """Per-wheel ABS activity from flags and pressures, one call per front-end sample."""
+
+    def __init__(self, options: AbsActivityOptions | None = None) -> None:
+        self.options = options or AbsActivityOptions()
+        # Running maxima over `window_s` (monotonic queues of (time, value)): the four wheels'
+        # pressures, then the demand.
+        self._maxima: tuple[deque[tuple[float, float]], ...] = tuple(deque() for _ in range(5))
+        self._last_time_s = -math.inf
+        self._last_active_s = [-math.inf] * 4
+
+    def reset(self) -> None:
+        for q in self._maxima:
+            q.clear()
+        self._last_time_s = -math.inf
+        self._last_active_s = [-math.inf] * 4
+
+    def update(self, time_s: float, pressures: tuple[float | None, ...], master_bar: float | None,
+               car_flag: float | None, wheel_flags: tuple[float | None, ...]) -> tuple[bool, bool, bool, bool]:
+        """The wheels the ABS works at `time_s`; None marks a signal not mapped or not yet seen."""
+        o = self.options
+        if time_s < self._last_time_s:
+            self.reset()            # the clock went back: the maxima belong to another time
+        self._last_time_s = time_s
+        released = self._released(time_s, pressures, master_bar)
+        for i in range(4):
+            flag = wheel_flags[i] if wheel_flags[i] is not None else car_flag
+            if released[i] or (flag is not None and flag >= 0.5):
+                self._last_active_s[i] = time_s
+        return tuple(time_s - t <= o.memory_s for t in self._last_active_s)  # type: ignore[return-value]
+
+    def _released(self, time_s: float, pressures: tuple[float | None, ...],
+                  master_bar: float | None) -> tuple[bool, bool, bool, bool]:
+        o = self.options
+        if any(p is None or not math.isfinite(p) for p in pressures):
+            return NO_ACTIVITY
+        now = [float(p) for p in pressures]  # type: ignore[arg-type]
+        demand = float(master_bar) if master_bar is not None and math.isfinite(master_bar) else max(now)
+        since = time_s - o.window_s
+        maxima = [_running_max(q, time_s, value, since) for q, value in zip(self._maxima, now + [demand])]
+        if demand < o.demand_kept_ratio * maxima[4]:
+            return NO_ACTIVITY      # the driver is letting go: every pressure falls, none is a release
+        out = []
+        for i in range(4):
+            peak, drop = maxima[i], maxima[i] - now[i]
+            out.append(peak >= o.min_pressure_bar and drop >= o.min_drop_bar and drop >= o.min_drop_ratio * peak)
+        return tuple(out)  # type: ignore[return-value]
+
+
+def _running_max(queue: deque[tuple[float, float]], time_s: float, value: float, since_s: float) -> float:
+    """Push (time_s, value) on a monotonic queue and return the maximum of the values since `since_s`."""
+    while queue and queue[-1][1] <= value:
+        queue.pop()
+    queue.append((time_s, value))
+    while queue[0][0] < since_s:
+        queue.popleft()
+    return queue[0][1]

@@ -120,6 +120,13 @@ class LugreTROptions:
     jump_window_s: float = 0.08
     jump_refractory_s: float = 0.2        # after a detected jump, let the new road fill the window
     #   (short enough to see the rear axle cross the same change a wheelbase later)
+    peak_group_samples: int = 6           # μ_max is never below a wheel's mean μ over this many neighbouring slips
+    measured_peak_margin: float = 0.05    # ... less this share (the axles' brake-gain split), ...
+    measured_peak_settle_s: float = 0.5   # ... from this long into a stop (the brake gain corrected)
+    body_floor_window_s: float = 0.3      # μ_max is never below the car's utilisation of the last this long ...
+    body_floor_smoothing_s: float = 0.05  # ... averaged over this (the accelerometer's noise)
+    body_floor_margin: float = 0.03       # ... less this (offset, pitch) ...
+    body_floor_relative_margin: float = 0.03   # ... and this share of it
     axle_balance_time_constant: float = 2.0   # s; 0 disables the front/rear brake-gain balance
     axle_balance_limit: float = 0.3
 
@@ -360,6 +367,44 @@ class _Window:
         return self.slip[s], self.speed[s], self.mu[s], self.time[s], self.wheel[s]
 
 
+class _SmoothedMaximum:
+    """The maximum, over a trailing span, of a series' mean over `smoothing_s`: O(1) a sample
+    (a running sum for the mean, a monotonic queue for the maximum)."""
+
+    def __init__(self, smoothing_s: float) -> None:
+        self.smoothing_s = smoothing_s
+        self._raw: deque[tuple[float, float]] = deque()
+        self._sum = 0.0
+        self._means: deque[tuple[float, float]] = deque()   # (time, mean), means decreasing
+
+    def push(self, time_s: float, value: float) -> None:
+        raw = self._raw
+        if raw and time_s < raw[-1][0]:
+            self.clear()            # the clock went back
+        raw.append((time_s, value))
+        self._sum += value
+        while raw[0][0] < time_s - self.smoothing_s:
+            self._sum -= raw.popleft()[1]
+        if time_s - raw[0][0] < 0.5 * self.smoothing_s:
+            return                  # not yet a mean over the span
+        mean = self._sum / len(raw)
+        means = self._means
+        while means and means[-1][1] <= mean:
+            means.pop()
+        means.append((time_s, mean))
+
+    def maximum(self, since_s: float) -> float | None:
+        means = self._means
+        while means and means[0][0] < since_s:
+            means.popleft()
+        return means[0][1] if means else None
+
+    def clear(self) -> None:
+        self._raw.clear()
+        self._means.clear()
+        self._sum = 0.0
+
+
 class LugreTrustRegionEstimator:
     """Recursive, bounded trust-region NLLS fit of static LuGre; one `update` per bus cycle."""
 
@@ -453,6 +498,9 @@ class LugreTrustRegionEstimator:
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
         self._abs_seen_s = [-math.inf] * N_WHEELS
+        self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
+        self._measured_peaks = [0.0] * N_WHEELS
+        self._event_start_s = -math.inf
         self._last_fit_s = -math.inf
         self._last_update_s: float | None = None
         self._cov_unit: np.ndarray | None = None
@@ -470,6 +518,7 @@ class LugreTrustRegionEstimator:
         """
         self._excitation_cache = None
         self._excitation_why: list = ["", "", "", ""]
+        self._event_start_s = self._last_sample_s
         self._cov_unit = None
         self._slip_support = None
         self._capped = None
@@ -550,6 +599,9 @@ class LugreTrustRegionEstimator:
         min_slip, isfinite, usable = o.min_slip, math.isfinite, sample.usable
         wheel_slips, wheel_mus = sample.slip, sample.mu_used
         abs_active = sample.abs_active
+        body_mu = sample.body_mu
+        if body_mu == body_mu:   # (not NaN: braking, with a fresh accelerometer)
+            self._body_mu.push(t, body_mu)
         if abs_active[0] or abs_active[1] or abs_active[2] or abs_active[3]:
             for i in range(N_WHEELS):
                 if abs_active[i]:
@@ -699,6 +751,8 @@ class LugreTrustRegionEstimator:
             self._last_excited_s = -math.inf
             self._excitation_cache = None
             self._mu_history.clear()
+            self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
+            self._measured_peaks = [0.0] * N_WHEELS
             # (`_peak_seen_speed` stays: the stop is still in ABS, only on another road; a wheel held
             # past the new fit's peak is evidence of it as much as of the old one's.)
 
@@ -922,6 +976,7 @@ class LugreTrustRegionEstimator:
         self._last_peak_slips = wheel_lam
         if self._due(0) or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(weights)
+            self._measured_peaks = self._data_peaks()
         # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, residual_ss / dof)
@@ -953,6 +1008,20 @@ class LugreTrustRegionEstimator:
         else:
             numbers = _peak_report_numpy(*args, self._params(x), *tail)
         wheel_mu, wheel_lam, self._capped, mu_max, slip_star, mu_std, wheel_std = numbers
+        measured = self._measured_peaks
+        if self._innovation_score <= o.jump_threshold and any(m > f for m, f in zip(measured, wheel_mu)):
+            # A wheel's data rose above its fitted peak (a sharp peak the static model rounds
+            # off): no tyre gives less than it was just measured to give. (Not while the newest
+            # residuals say the road is changing: the grip measured may be the old road's.)
+            wheel_mu = tuple(max(m, f) for m, f in zip(measured, wheel_mu))
+            mu_max = sum(share * m for share, m in zip(self._load_share, wheel_mu))
+        floor = self._body_floor(now_s)
+        if mu_max < floor:
+            # The fit's peak lies below the grip the car has just used (a sharp peak the static
+            # model cannot follow, say): no road gives less than that. The wheels keep their split.
+            lift = floor / max(mu_max, 1e-6)
+            wheel_mu = tuple(m * lift for m in wheel_mu)
+            mu_max = floor
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
         if self._due(1) or self._excitation_cache is None:
@@ -991,6 +1060,47 @@ class LugreTrustRegionEstimator:
         if status == Status.VALID:
             self._last_valid = estimate
         return estimate
+
+    def _data_peaks(self) -> list[float]:
+        """Per wheel, the highest μ its newest samples (`excitation_window_s`) show with
+        confidence; 0 without enough of them.
+
+        The samples in slip order, in groups of `peak_group_samples` neighbours: each group's
+        mean μ less twice its standard error; the highest of these. Means over neighbouring slips
+        average the noise of the wheel-acceleration filter (several % of μ on dry asphalt under
+        ABS) that a single high sample carries; the two standard errors cover the maximum over
+        a few groups picking the noisiest.
+        """
+        o = self.options
+        w = self._window
+        k = o.peak_group_samples
+        out = [0.0] * N_WHEELS
+        if k <= 1 or len(w) < k or self._last_sample_s - self._event_start_s < o.measured_peak_settle_s:
+            # (Early in a stop a wheel's μ carries the brake gain's error, ±20 %, until the front
+            # end's body-equation check has corrected it: then it bounds nothing.)
+            return out
+        lo = int(w.time[w.start:w.end].searchsorted(self._last_sample_s - o.excitation_window_s)) + w.start
+        slip, mu, wheel = w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end]
+        for i in range(N_WHEELS):
+            sel = wheel == i
+            n = int(np.count_nonzero(sel))
+            if n < max(k, self._min_wheel_samples):
+                continue
+            groups = mu[sel][np.argsort(slip[sel], kind="stable")][: n - n % k].reshape(-1, k)
+            means = groups.mean(axis=1) - 2.0 * groups.std(axis=1, ddof=1) / math.sqrt(k)
+            out[i] = max(0.0, float(means.max()) * (1.0 - o.measured_peak_margin))
+        return out
+
+    def _body_floor(self, now_s: float) -> float:
+        """The least μ_max the car's own deceleration allows: the highest utilisation it showed
+        over the last `body_floor_window_s` (each a mean over `body_floor_smoothing_s`), less the
+        accelerometer's margins; 0 without such data. The load-weighted μ_max bounds the total
+        tyre force over the weight: Σ μ_i F_N,i / Σ F_N,i ≤ Σ μ_max,i F_N,i / Σ F_N,i."""
+        o = self.options
+        best = self._body_mu.maximum(now_s - o.body_floor_window_s)
+        if best is None:
+            return 0.0
+        return best * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
 
     def _restate(self, last: FrictionEstimate, now_s: float) -> FrictionEstimate:
         """The last (CONVERGING) fit again, at a cycle without usable samples.

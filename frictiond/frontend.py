@@ -56,6 +56,7 @@ _BRAKE_MODEL_WINDOW_S = 0.2                 # ... in most of the braking of abou
 MAX_PRESSURE_BAR = 350.0
 MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 MAX_SPEED_MPS = 120.0
+BODY_WHEELS_TOLERANCE = 0.25   # the body's and the wheels' total force agree within this (pad friction ±20 %)
 
 
 @dataclass(frozen=True, slots=True)
@@ -390,7 +391,33 @@ class FrontEnd:
         result = self._compute_sample(stale)
         if result.sample is not None:
             self._mark_abs_activity(result.sample)
+            self._mark_body_mu(result.sample)
         return result
+
+    def _mark_body_mu(self, sample: PhysicalSample) -> None:
+        """`sample.body_mu`: the car's total longitudinal tyre force over its weight, from the
+        accelerometer (offset removed) less drag and rolling resistance, where the wheels' own
+        sum agrees (the smaller of the two).
+
+        An accelerometer reads the contact and air forces over the mass, not gravity, so this
+        holds on a slope, and the mass cancels (a loaded car reads the same). No road gives less
+        grip than the tyres just used: the load-weighted μ_max is at least this.
+        """
+        if not sample.braking:
+            return
+        accel = self._value("accel_long", sample.time_s)
+        if accel is None or not math.isfinite(accel):
+            return
+        veh = self.vehicle
+        v = sample.speed_mps
+        resistance = (veh.drag_area_coefficient * v * v + veh.rolling_resistance * v) / veh.mass
+        body = (-(accel - self._accel_bias_mps2) - resistance) / GRAVITY_MPS2
+        # The same total from the wheels (brake torques, inertia): a bound must not rest on one
+        # sensor alone. Beyond what brake-gain error explains, one of them is wrong: no bound.
+        load = sum(sample.normal_force_n)
+        wheels = sum(sample.tyre_force_n) / load if load > 0.0 else math.nan
+        if abs(body - wheels) <= BODY_WHEELS_TOLERANCE * abs(wheels) + 0.05:
+            sample.body_mu = min(body, wheels)
 
     def _mark_abs_activity(self, sample: PhysicalSample) -> None:
         """`sample.abs_active`: the wheels an ABS is working (see `abs_activity`), from the

@@ -45,6 +45,7 @@ class PhysicalSample:
     braking: bool = False         # brake applied (pressure above push-out) on any wheel
     speed_from_reference: bool = False
     abs_active: tuple[bool, bool, bool, bool] = (False, False, False, False)   # an ABS works the wheel
+    body_mu: float = float("nan")  # the car's total tyre force / weight, from its accelerometer
 
 
 @dataclass(slots=True)

@@ -18,6 +18,7 @@ COMMAND_MODULES = (
     "run",
     "monitor",
     "check_config",
+    "fleet",          # needs the `fleet` extra (dask, pyarrow) when called, not to be listed
 )
 
 

@@ -74,9 +74,9 @@ def test_cluster_of_two_workers_matches_the_sequential_path(corpus, sequential, 
     captured = capsys.readouterr()
     assert code == 65, captured.err           # the garbage log failed, the run went on
     assert "zz-garbage.blf: crash: BLFParseError" in captured.err
-    assert f"{CORPUS_LOGS + 1} logs, 0 already done, {CORPUS_LOGS + 1} replayed" in captured.out
-
     logs = _by_path(out, "logs")
+    hours = sum(r[0]["duration_s"] or 0.0 for r in logs.values()) / 3600
+    assert f"{CORPUS_LOGS + 1} logs, 0 already done, {CORPUS_LOGS + 1} replayed ({hours:.2f} h of driving)" in captured.out
     assert len(logs) == CORPUS_LOGS + 1
     garbage = logs[str((corpus / "zz-garbage.blf").resolve())][0]
     assert garbage["error_kind"] == "crash" and "BLFParseError" in garbage["error_message"]
@@ -264,3 +264,34 @@ def test_open_executor_runs_plain_callables():
     with open_executor(workers=1) as executor:
         assert list(executor.map(math.sqrt, [4.0, 9.0])) == [2.0, 3.0]
         assert executor.submit(pow, 2, 10).result() == 1024
+
+
+def test_replay_on_an_existing_scheduler(corpus, sequential, tmp_path, capsys):
+    from distributed import LocalCluster
+
+    logs = [str(corpus / f"drive-0000{k}{ext}") for k, ext in ((0, ".log"), (1, ".asc"), (2, ".blf"))]
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        code = main(["fleet", "replay", *logs, "-o", str(tmp_path / "r"), "--scheduler", cluster.scheduler_address])
+    assert code == 0, capsys.readouterr().err
+    rows = _by_path(tmp_path / "r", "stops")
+    reference = _by_path(sequential, "stops")
+    assert {p: [r["mu_max_valid"] for r in v] for p, v in rows.items()} == \
+        {p: [r["mu_max_valid"] for r in reference[p]] for p in rows}
+
+
+def test_progress_bar_on_a_terminal_only():
+    import io
+
+    from frictiond.fleet.run import RunReport, progress_printer
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    tty, pipe = Terminal(), io.StringIO()
+    for done in (1, 4):
+        report = RunReport(total=5, skipped=1, replayed=done, failed=1, wall_s=2.0)
+        progress_printer(tty)(report)
+        progress_printer(pipe)(report)
+    assert pipe.getvalue() == ""
+    assert "\r[" in tty.getvalue() and "4/4 logs, 1 failed" in tty.getvalue() and tty.getvalue().endswith("\n")

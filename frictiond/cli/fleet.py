@@ -179,8 +179,9 @@ def _do_replay(args: argparse.Namespace) -> int:
         print(f"frictiond: {path}: {kind}: {message}", file=sys.stderr)
     if len(report.failures) > 20:
         print(f"frictiond: ... and {len(report.failures) - 20} more failed logs (error_kind in logs/)", file=sys.stderr)
-    print(f"fleet: {report.total} logs, {report.skipped} already done, {report.replayed} replayed in "
-          f"{report.wall_s:.1f} s ({report.failed} failed), {report.stops} stops -> {output}")
+    print(f"fleet: {report.total} logs, {report.skipped} already done, {report.replayed} replayed "
+          f"({report.drive_s / 3600:.2f} h of driving) in {report.wall_s:.1f} s ({report.failed} failed), "
+          f"{report.stops} stops -> {output}")
     return EXIT_DATA_ERROR if report.failed else 0
 
 

@@ -29,14 +29,19 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         finally:
             client.close()
         return
+    import dask
+
     n_workers = workers if workers and workers > 0 else (os.cpu_count() or 1)
     # One single-threaded process per worker: the replay is CPU-bound Python (the GIL would
     # serialise threads); no dashboard (an HTTP port nobody asked for); Dask's own INFO lines
-    # about starting workers are noise on a command's stderr.
-    with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=logging.ERROR) as cluster:
-        with Client(cluster) as client:
-            yield client
+    # about starting workers are noise on a command's stderr. The workers' statistical profiler
+    # (a stack sample of the running task every 10 ms, for the dashboard nobody sees) is off: it
+    # takes the GIL from CPU-bound tasks (the nannies pass this config on to the workers).
+    with dask.config.set({"distributed.worker.profile.enabled": False}):
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR)
+    with cluster, Client(cluster) as client:
+        yield client
 
 
 def _quiet_dask() -> None:

@@ -58,6 +58,7 @@ LOG_SCHEMA = pa.schema(_RUN_COLUMNS + [
     pa.field("error_kind", pa.string()),         # null when the log replayed; else see run.py
     pa.field("error_message", pa.string()),
     pa.field("task_s", pa.float64()),            # wall time of the replay inside the worker
+    pa.field("task_cpu_s", pa.float64()),        # its CPU time (below task_s: the core was shared)
     pa.field("worker", pa.string()),             # host:pid that ran it
 ])
 

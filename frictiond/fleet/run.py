@@ -95,7 +95,7 @@ def replay_one(task: LogTask) -> LogResult:
     from ..pipeline import Pipeline
     from ..replay import replay_log
 
-    started = time.perf_counter()
+    started, started_cpu = time.perf_counter(), time.process_time()
     row = _base_row(task)
     row.update(size_bytes=task.size_bytes, mtime_ns=task.mtime_ns,
                worker=f"{socket.gethostname()}:{os.getpid()}")
@@ -109,13 +109,14 @@ def replay_one(task: LogTask) -> LogResult:
     except Exception as exc:  # noqa: BLE001 - one bad log must not stop a fleet run
         kind = ("format" if isinstance(exc, LogFormatError) else
                 "unreadable" if isinstance(exc, OSError) else "crash")
-        row.update(error_kind=kind, error_message=_describe(exc), task_s=time.perf_counter() - started)
+        row.update(error_kind=kind, error_message=_describe(exc), task_s=time.perf_counter() - started,
+                   task_cpu_s=time.process_time() - started_cpu)
         return LogResult(row)
     row.update(_summary_columns(summary))
     row["stops"] = len(stops)
     first_s = summary.first_time_s or 0.0
     stop_rows = [_stop_row(task, k, stop, first_s, row["estimator"]) for k, stop in enumerate(stops)]
-    row["task_s"] = time.perf_counter() - started
+    row.update(task_s=time.perf_counter() - started, task_cpu_s=time.process_time() - started_cpu)
     return LogResult(row, stop_rows)
 
 
@@ -180,6 +181,8 @@ class RunReport:
     stops: int = 0
     wall_s: float = 0.0
     task_s: float = 0.0     # sum of the replays' own times (inside the workers)
+    task_cpu_s: float = 0.0  # ... their CPU time
+    drive_s: float = 0.0    # sum of the replayed logs' durations
     failures: list[tuple[str, str, str]] = field(default_factory=list)   # (path, kind, message)
 
 
@@ -267,6 +270,8 @@ def _count(report: RunReport, result: LogResult) -> None:
     report.replayed += 1
     report.stops += len(result.stop_rows)
     report.task_s += result.log_row.get("task_s") or 0.0
+    report.task_cpu_s += result.log_row.get("task_cpu_s") or 0.0
+    report.drive_s += result.log_row.get("duration_s") or 0.0
     if result.failed:
         report.failed += 1
         row = result.log_row

@@ -434,7 +434,7 @@ enum {
     K_MAX_GAP, K_UNEXPLAINED_DECEL, K_RADIUS, K_GAIN_FREE, K_GAIN_UP, K_GAIN_DOWN, K_MIN_BRAKED_SLIP,
     K_MAX_ALL_WHEEL_SLIP, K_SAMPLE_PERIOD, K_BIAS_TAU, K_MASS, K_CG_HEIGHT, K_CG_FRONT, K_CG_REAR, K_TRACK_FRONT,
     K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
-    K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
+    K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_MASTER_ONLY, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
     K_COUNT
 };
 
@@ -445,12 +445,18 @@ enum {
 #define FREE_ROLLING_ACCEL 2.0
 #define BRAKE_MODEL_MARGIN 1.25
 #define BRAKE_MODEL_WINDOW 0.2
+#define LOCKED_WHEEL_RATIO 0.05
+#define BODY_ACCEL_TOLERANCE 0.05
+#define PRESSURE_TOLERANCE 0.25
+#define UNLEARNT_ACCEL_TOLERANCE 0.3
+#define ACCEL_BIAS_LEARNT_SAMPLES 50
+#define PRESSURE_SENSOR_LAG 0.04
 #define GRAVITY 9.80665
 
 /* The FrontEnd attributes sample_physics reads and writes. */
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
-    *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn, *A_recent_tt,
-    *A_recent_far, *A_gain_factor, *A_model_holds;
+    *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn, *A_recent_count,
+    *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released;
 
 typedef struct {
     long repeats[NW];
@@ -460,8 +466,8 @@ typedef struct {
     int has_last_sample, has_speed_time, has_speed_est;
     double last_sample, bias, unexplained, speed_time, speed_est;
     long bias_samples, ref_disagreements;
-    double gain_tt, gain_tn, recent_tt, recent_far, gain_factor;
-    int model_holds;
+    double gain_tt, gain_tn, recent_count, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
+    int model_holds, released;
 } FEState;
 
 static int get_float_attr(PyObject *obj, PyObject *name, double *out, int *present)
@@ -544,8 +550,13 @@ static int load_state(PyObject *fe, FEState *s)
         || get_float_attr(fe, A_speed_est, &s->speed_est, &s->has_speed_est) < 0
         || get_long_attr(fe, A_ref_disagreements, &s->ref_disagreements) < 0
         || get_float_attr(fe, A_gain_tt, &s->gain_tt, NULL) < 0 || get_float_attr(fe, A_gain_tn, &s->gain_tn, NULL) < 0
-        || get_float_attr(fe, A_recent_tt, &s->recent_tt, NULL) < 0
-        || get_float_attr(fe, A_recent_far, &s->recent_far, NULL) < 0
+        || get_float_attr(fe, A_recent_count, &s->recent_count, NULL) < 0
+        || get_float_attr(fe, A_recent_weight, &s->recent_weight, NULL) < 0
+        || get_float_attr(fe, A_recent_lag, &s->recent_lag, NULL) < 0
+        || get_float_attr(fe, A_last_brake, &s->last_brake, NULL) < 0
+        || get_float_attr(fe, A_recent_needed, &s->recent_needed, NULL) < 0
+        || get_float_attr(fe, A_recent_brake, &s->recent_brake, NULL) < 0
+        || get_bool_attr(fe, A_released, &s->released) < 0
         || get_float_attr(fe, A_gain_factor, &s->gain_factor, NULL) < 0
         || get_bool_attr(fe, A_model_holds, &s->model_holds) < 0)
         goto out;
@@ -601,8 +612,13 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_ref_disagreements, PyLong_FromLong(s->ref_disagreements)) < 0
         || set_attr_new(fe, A_gain_tt, PyFloat_FromDouble(s->gain_tt)) < 0
         || set_attr_new(fe, A_gain_tn, PyFloat_FromDouble(s->gain_tn)) < 0
-        || set_attr_new(fe, A_recent_tt, PyFloat_FromDouble(s->recent_tt)) < 0
-        || set_attr_new(fe, A_recent_far, PyFloat_FromDouble(s->recent_far)) < 0
+        || set_attr_new(fe, A_recent_count, PyFloat_FromDouble(s->recent_count)) < 0
+        || set_attr_new(fe, A_recent_weight, PyFloat_FromDouble(s->recent_weight)) < 0
+        || set_attr_new(fe, A_recent_lag, PyFloat_FromDouble(s->recent_lag)) < 0
+        || set_attr_new(fe, A_last_brake, PyFloat_FromDouble(s->last_brake)) < 0
+        || set_attr_new(fe, A_recent_needed, PyFloat_FromDouble(s->recent_needed)) < 0
+        || set_attr_new(fe, A_recent_brake, PyFloat_FromDouble(s->recent_brake)) < 0
+        || set_attr_new(fe, A_released, PyBool_FromLong(s->released)) < 0
         || set_attr_new(fe, A_gain_factor, PyFloat_FromDouble(s->gain_factor)) < 0
         || set_attr_new(fe, A_model_holds, PyBool_FromLong(s->model_holds)) < 0)
         goto out;
@@ -712,30 +728,55 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
 
 /* FrontEnd._update_brake_gain */
 static void update_brake_gain(FEState *s, const double *k, double accel_long, double speed, const double *inertia,
-                              const double *brake, const double *drive)
+                              const double *brake, const double *drive, const double *wl)
 {
     const double decel = -accel_long;
     const double total_brake = sum_of(brake, NW);
-    if (decel < k[K_GAIN_MIN_DECEL] || total_brake < 1.0)
+    const double brake_rate = (total_brake - s->last_brake) / k[K_SAMPLE_PERIOD];
+    s->last_brake = total_brake;
+    if (decel < k[K_GAIN_MIN_DECEL] || total_brake < 1.0 || !isfinite(brake_rate))
+        return;
+    const double locked = py_max(0.3, LOCKED_WHEEL_RATIO * speed);
+    double slowest = wl[0];
+    for (int i = 1; i < NW; i++)
+        slowest = py_min(slowest, wl[i]);
+    if (speed < k[K_MIN_SPEED] || slowest < locked)
         return;
     const double drag = k[K_ROLLING] * speed + k[K_DRAG] * speed * speed;
     const double total_force = k[K_MASS] * decel - drag;
     const double other = sum_of(inertia, NW) - sum_of(drive, NW);
     const double lim = k[K_GAIN_LIMITS];
-    double ratio = (total_force * k[K_RADIUS] - other) / total_brake;
+    const double needed = total_force * k[K_RADIUS] - other;
+    double ratio = needed / total_brake;
     if (!isfinite(ratio))
         return;
-    const int far = !((1.0 - lim) / BRAKE_MODEL_MARGIN <= ratio && ratio <= (1.0 + lim) * BRAKE_MODEL_MARGIN);
-    ratio = py_min(py_max(ratio, 1.0 - lim), 1.0 + lim);
-    const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_GAIN_TAU], 1e-3));
-    const double weight = total_brake * total_brake;
-    s->gain_tt = keep * s->gain_tt + weight;
-    s->gain_tn = keep * s->gain_tn + weight * ratio;
     const double recent = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / BRAKE_MODEL_WINDOW);
-    s->recent_tt = recent * s->recent_tt + weight;
-    s->recent_far = recent * s->recent_far + (far ? weight : 0.0);
-    s->gain_factor = s->gain_tn / s->gain_tt;
-    s->model_holds = s->recent_far <= 0.5 * s->recent_tt;
+    s->recent_count = recent * s->recent_count + 1.0;
+    s->recent_weight = recent * s->recent_weight + total_brake;
+    s->recent_needed = recent * s->recent_needed + total_brake * needed;
+    s->recent_brake = recent * s->recent_brake + total_brake * total_brake;
+    s->recent_lag = recent * s->recent_lag + total_brake * PRESSURE_SENSOR_LAG * brake_rate;
+    const double window_ratio = s->recent_needed / s->recent_brake;
+    const double signed_gap = (s->recent_needed - s->recent_brake) / s->recent_weight;
+    const double lag_explains = s->recent_lag / s->recent_weight;
+    const double gap = signed_gap * lag_explains > 0 ? fabs(signed_gap) - fabs(lag_explains) : fabs(signed_gap);
+    const double gains = k[K_BRAKE_GAIN_FL] + k[K_BRAKE_GAIN_FR] + k[K_BRAKE_GAIN_RL] + k[K_BRAKE_GAIN_RR];
+    const double accel_tolerance = BODY_ACCEL_TOLERANCE
+                                   + (s->bias_samples < ACCEL_BIAS_LEARNT_SAMPLES ? UNLEARNT_ACCEL_TOLERANCE : 0.0);
+    const int resolved = gap > k[K_MASS] * k[K_RADIUS] * accel_tolerance + PRESSURE_TOLERANCE * gains;
+    const int released = k[K_MASTER_ONLY] != 0.0 && window_ratio < 1.0 - lim && resolved;
+    s->released = released;
+    s->model_holds = released || !resolved
+                     || ((1.0 - lim) / BRAKE_MODEL_MARGIN <= window_ratio
+                         && window_ratio <= (1.0 + lim) * BRAKE_MODEL_MARGIN);
+    if (!released) {
+        ratio = py_min(py_max(ratio, 1.0 - lim), 1.0 + lim);
+        const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_GAIN_TAU], 1e-3));
+        const double weight = total_brake * total_brake;
+        s->gain_tt = keep * s->gain_tt + weight;
+        s->gain_tn = keep * s->gain_tn + weight * ratio;
+        s->gain_factor = s->gain_tn / s->gain_tt;
+    }
 }
 
 /* An optional float of the inputs tuple: 1 and its value, 0 for None, -1 with an exception. */
@@ -944,7 +985,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     for (int i = 0; i < NW; i++)
         inertia[i] = k[K_INERTIA] * omega_dot[i];
     if (k[K_GAIN_CORRECTION] != 0.0 && !glitch)
-        update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive);
+        update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive, wl);
     const double gain = s.gain_factor;
 
     double slips[NW], forces[NW], mus[NW];
@@ -961,7 +1002,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         const double mu = load > 50.0 ? force / load : 0.0;
         const int ok = speed >= k[K_MIN_SPEED] && fabs(slip) <= k[K_MAX_SLIP]
                        && (braked[i] || (has_drive && fabs(drive[i]) > 20.0)) && load > 50.0 && !glitch && !stuck[i]
-                       && !dead[i] && isfinite(mu) && s.model_holds;
+                       && !dead[i] && isfinite(mu) && s.model_holds && !s.released;
         slips[i] = slip;
         forces[i] = force;
         mus[i] = mu;
@@ -992,7 +1033,8 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     for (int i = 0, j = 0; i < NW; i++)
         if (dead[i])
             PyTuple_SET_ITEM(dead_list, j++, PyLong_FromLong(i));
-    PyObject *fault = glitch ? f_glitch : any_stuck ? f_stuck : (s.model_holds || !braking) ? Py_None : f_disagrees;
+    PyObject *fault = glitch ? f_glitch : any_stuck ? f_stuck : (s.model_holds || !braking || speed < k[K_MIN_SPEED]) ? Py_None
+                                                                                      : f_disagrees;
     result = make_result(result_type, sample, stale, fault, dead_list);
 out:
     Py_XDECREF(usable);
@@ -1009,7 +1051,9 @@ static int intern_attributes(void)
         {&A_bias_samples, "_accel_bias_samples"}, {&A_unexplained, "_unexplained_s"},
         {&A_speed_time, "_speed_time_s"}, {&A_speed_est, "_speed_estimate_mps"},
         {&A_ref_disagreements, "_ref_disagreements"}, {&A_gain_tt, "_gain_sum_tt"}, {&A_gain_tn, "_gain_sum_tn"},
-        {&A_recent_tt, "_recent_sum_tt"}, {&A_recent_far, "_recent_sum_far"}, {&A_gain_factor, "_brake_gain_factor"},
+        {&A_recent_count, "_recent_count"}, {&A_recent_weight, "_recent_weight_nm"},
+        {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
+        {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
         {&A_model_holds, "_brake_model_holds"},
     };
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)

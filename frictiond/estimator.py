@@ -101,6 +101,7 @@ class LugreTROptions:
     excitation_slip_rate: float = 0.3     # 1/s: a stop's first evidence of the peak needs a wheel running away
     excitation_relative_slip_rate: float = 5.0   # ... or its slip growing at this many times itself per second
     excitation_runaway_elasticity: float = 0.3   # ... while μ grows by at most this share of the slip's relative growth
+    excitation_runaway_decel: float = 1.0        # m/s²: ... and the wheel decelerating this much faster than the car
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
@@ -1328,7 +1329,12 @@ class LugreTrustRegionEstimator:
             # applied briskly moves the slip as fast in the linear region (0.3 /s at 65 % of
             # the grip on wet), but there μ rises in proportion.
             # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
-            needed = min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi)
+            # And in sliding speed, not only in slip: at walking pace the speed estimate's noise,
+            # divided by a small speed, makes slip "grow" at rates a runaway shows at speed; a wheel
+            # past its peak decelerates faster than the car by (T_brake − R·F_peak)·R/J, above a
+            # m/s² on any road but the most polished ice.
+            needed = max(min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi),
+                         o.excitation_runaway_decel / max(speed, 1.0))
             if not runaway_rate >= needed:
                 return "slip not running away", 0.0, True
         if lam_hi * speed < o.excitation_min_sliding_mps:

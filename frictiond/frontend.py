@@ -53,6 +53,22 @@ FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
 _BRAKE_MODEL_WINDOW_S = 0.2                 # ... in most of the braking of about this long
+# A wheel slower than this share of the car's speed (and 0.3 m/s) is locked: its brake clamps it
+# and passes only the tyre's sliding force, not the torque its pressure could give.
+LOCKED_WHEEL_RATIO = 0.05      # (also in _frontcore.c)
+# What the body equation cannot resolve, as a torque: an accelerometer offset and the road's grade
+# (this much of a deceleration) and each wheel's pressure offset (bar, times its gain). A smaller
+# disagreement proves no signal wrong, however large its ratio (ice, where the brake torques are
+# of the order of the wheels' inertia torques). (Also in _frontcore.c.)
+BODY_ACCEL_TOLERANCE_MPS2 = 0.05
+PRESSURE_TOLERANCE_BAR = 0.25
+# ... and until free rolling has taught the accelerometer's offset (this many samples), the
+# offset a sensor may have (a fault seen right after start-up would be the accelerometer's).
+UNLEARNT_ACCEL_TOLERANCE_MPS2 = 0.3
+ACCEL_BIAS_LEARNT_SAMPLES = 50
+# ... and while the brakes' torque moves, what a pressure sensor trailing it by this long misses
+# (a pedal applied at 1,500 bar/s, an ABS dump: tens of bar).
+PRESSURE_SENSOR_LAG_S = 0.04
 MAX_PRESSURE_BAR = 350.0
 MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 MAX_SPEED_MPS = 120.0
@@ -186,8 +202,12 @@ class FrontEnd:
         message_signals: Mapping[str, Iterable[str]],
         message_periods: Mapping[str, float | None],
         trigger_message: str,
+        pressures_are_master: bool = False,
     ) -> None:
         options.validate()
+        # All wheel pressures read from one signal: the driver's demand, an upper bound of each
+        # wheel's pressure while an ABS works (it only ever releases).
+        self.pressures_are_master = pressures_are_master
         self.vehicle = vehicle
         self.options = options
         # The compiled derivative filter when installed; `None` runs the float code (tests compare).
@@ -259,7 +279,7 @@ class FrontEnd:
             vehicle.wheel_inertia, options.brake_gain_correction, options.brake_gain_min_decel,
             vehicle.rolling_resistance, vehicle.drag_area_coefficient, options.brake_gain_limits,
             options.brake_gain_time_constant, options.max_slip, self._has_drive_torque, self._has_yaw_rate,
-            *self._brake_gains))
+            float(self.pressures_are_master), *self._brake_gains))
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -274,7 +294,11 @@ class FrontEnd:
         self._accel_bias_samples = 0
         self._brake_gain_factor = 1.0
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
-        self._recent_sum_tt = self._recent_sum_far = 0.0   # the same over ~0.2 s, and of far samples
+        # Over ~0.2 s of braking: samples, Σ brake torque T, Σ T × torque the body needed, Σ T², ...
+        self._recent_count = self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
+        self._recent_lag_nm = 0.0          # ... Σ T × what the pressure sensors' lag may hide (signed)
+        self._last_brake_nm = 0.0
+        self._brake_released = False       # one master pressure overstating the brakes: an ABS at work
         self._brake_model_holds = True
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
@@ -648,7 +672,7 @@ class FrontEnd:
         if opts.brake_gain_correction and not glitch:
             # The body's deceleration through the same filter as the torques it is compared with.
             self._update_brake_gain(accel_long_matched - self._accel_bias_mps2,
-                                    speed, inertia_torques, brake_torques, drive)
+                                    speed, inertia_torques, brake_torques, drive, wheel_linear)
         gain = self._brake_gain_factor
 
         slips = []
@@ -673,6 +697,7 @@ class FrontEnd:
                 and not dead[i]
                 and math.isfinite(mu)
                 and self._brake_model_holds
+                and not self._brake_released
             )
             slips.append(slip)
             forces.append(force)
@@ -691,7 +716,8 @@ class FrontEnd:
             speed_from_reference=from_ref,
         )
         fault = ("wheel speed glitch" if glitch else "wheel speed stuck" if any(stuck)
-                 else None if self._brake_model_holds or not braking else "brake pressure disagrees with deceleration")
+                 else None if self._brake_model_holds or not braking or speed < opts.min_speed
+                 else "brake pressure disagrees with deceleration")
         return FrontEndResult(sample, stale, fault, tuple(i for i in range(4) if dead[i]))
 
     def _dead_wheels(self, time_s: float, wheel_linear: list[float], braked: list[bool]) -> list[bool]:
@@ -813,13 +839,22 @@ class FrontEnd:
         inertia_torques: list[float],
         brake_torques: list[float],
         drive: list[float],
+        wheel_linear: list[float],
     ) -> None:
         """Body equation M dv/dt = −ΣF_x − B v − D v² as an independent check on brake force."""
         opts = self.options
         veh = self.vehicle
         decel = -accel_long
         total_brake = sum(brake_torques)
-        if decel < opts.brake_gain_min_decel or total_brake < 1.0:
+        brake_rate = (total_brake - self._last_brake_nm) / self.sample_period_s
+        self._last_brake_nm = total_brake
+        if decel < opts.brake_gain_min_decel or total_brake < 1.0 or not math.isfinite(brake_rate):
+            return
+        # Not at walking pace (slip and the wheels' derivatives are ill-conditioned there, and a
+        # car held at rest by its brakes decelerates by nothing), nor with a wheel locked: a
+        # clamped wheel passes the tyre's sliding force, far less than its pressure could.
+        locked = max(0.3, LOCKED_WHEEL_RATIO * speed)
+        if speed < opts.min_speed or min(wheel_linear) < locked:
             return
         drag = veh.rolling_resistance * speed + veh.drag_area_coefficient * speed * speed
         total_force = veh.mass * decel - drag
@@ -833,24 +868,47 @@ class FrontEnd:
         # Each sample's own ratio is clipped to the limits first: one wild sample (spoofed wheel
         # speeds give inertia torques of kN·m) moves the sums no more than a plausible one.
         lim = opts.brake_gain_limits
-        ratio = (total_force * veh.wheel_radius - other) / total_brake
+        needed = total_force * veh.wheel_radius - other
+        ratio = needed / total_brake
         if not math.isfinite(ratio):
             return      # a NaN here would stay in the sums for good
-        # Far outside the limits, the pressures do not say what the brakes do (a pressure signal
-        # scaled wrong, a sensor drifting by a factor): when most of the last 0.2 s of braking
-        # (brake-torque weighted, no prior) is like that, no wheel's μ is trusted and the front
-        # end reports a fault.
-        far = not (1.0 - lim) / _BRAKE_MODEL_MARGIN <= ratio <= (1.0 + lim) * _BRAKE_MODEL_MARGIN
-        ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
-        keep = 1.0 - min(1.0, self.sample_period_s / max(opts.brake_gain_time_constant, 1e-3))
-        weight = total_brake * total_brake
-        self._gain_sum_tt = keep * self._gain_sum_tt + weight
-        self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
+        # The pressures against the body over the last ~0.2 s of braking (sums of torques, so that
+        # the pressure sensors' lag and the wheels' inertia torques through an ABS cycle average
+        # out, and small torques count little): far outside the gain limits, and by more than an
+        # accelerometer offset and the pressures' offsets explain, the pressures do not say what
+        # the brakes do (a signal scaled wrong, a sensor drifting by a factor). Then no wheel's μ
+        # is trusted and the front end reports a fault.
+        # Each sample weighs by its brake torque (the first instants of a stop, a few N·m against
+        # the wheels' inertia and a lagging accelerometer, count little).
         recent = 1.0 - min(1.0, self.sample_period_s / _BRAKE_MODEL_WINDOW_S)
-        self._recent_sum_tt = recent * self._recent_sum_tt + weight
-        self._recent_sum_far = recent * self._recent_sum_far + (weight if far else 0.0)
-        self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
-        self._brake_model_holds = self._recent_sum_far <= 0.5 * self._recent_sum_tt
+        self._recent_count = recent * self._recent_count + 1.0
+        self._recent_weight_nm = recent * self._recent_weight_nm + total_brake
+        self._recent_needed_nm = recent * self._recent_needed_nm + total_brake * needed
+        self._recent_brake_nm = recent * self._recent_brake_nm + total_brake * total_brake
+        self._recent_lag_nm = recent * self._recent_lag_nm + total_brake * PRESSURE_SENSOR_LAG_S * brake_rate
+        window_ratio = self._recent_needed_nm / self._recent_brake_nm
+        # A sensor trailing the brakes reads low while they apply and high while they release: a
+        # lag of up to `PRESSURE_SENSOR_LAG_S` explains a disagreement of that sign, up to that size.
+        gap = (self._recent_needed_nm - self._recent_brake_nm) / self._recent_weight_nm
+        lag_explains = self._recent_lag_nm / self._recent_weight_nm
+        gap = abs(gap) - abs(lag_explains) if gap * lag_explains > 0 else abs(gap)
+        accel_tolerance = BODY_ACCEL_TOLERANCE_MPS2 + (
+            UNLEARNT_ACCEL_TOLERANCE_MPS2 if self._accel_bias_samples < ACCEL_BIAS_LEARNT_SAMPLES else 0.0)
+        resolved = gap > veh.mass * veh.wheel_radius * accel_tolerance + PRESSURE_TOLERANCE_BAR * sum(self._brake_gains)
+        # With one master pressure for all wheels, brakes giving less than it says beyond what the
+        # gain correction explains are an ABS releasing wheels, not a wrong signal: no gain is
+        # learnt then, and no wheel's brake torque is known (`_brake_released`).
+        released = self.pressures_are_master and window_ratio < 1.0 - lim and resolved
+        self._brake_released = released
+        self._brake_model_holds = (released or not resolved
+                                   or (1.0 - lim) / _BRAKE_MODEL_MARGIN <= window_ratio <= (1.0 + lim) * _BRAKE_MODEL_MARGIN)
+        if not released:
+            ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
+            keep = 1.0 - min(1.0, self.sample_period_s / max(opts.brake_gain_time_constant, 1e-3))
+            weight = total_brake * total_brake
+            self._gain_sum_tt = keep * self._gain_sum_tt + weight
+            self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
+            self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
 
 
 # What `_frontcore.sample_physics` builds its results from: the two result types, then the
@@ -906,8 +964,10 @@ def make_front_end(
     options: FrontEndOptions,
     messages: Iterable[Any],
     trigger_message: str,
+    pressures_are_master: bool = False,
 ) -> FrontEnd:
-    """Build from message descriptions having `name`, `period_s` and `signals` (canonical names)."""
+    """Build from message descriptions having `name`, `period_s` and `signals` (canonical names);
+    `pressures_are_master`: the four wheel pressures are one signal (see `FrontEnd`)."""
     messages = list(messages)
     return FrontEnd(
         vehicle,
@@ -915,4 +975,5 @@ def make_front_end(
         {m.name: tuple(m.signals) for m in messages},
         {m.name: m.period_s for m in messages},
         trigger_message,
+        pressures_are_master,
     )

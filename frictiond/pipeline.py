@@ -13,7 +13,7 @@ from typing import Any
 from .codec import DecodeFailure, InputCodec, OutputCodec, load_databases
 from .config import Config
 from .frames import Frame
-from .frontend import FrontEnd, FrontEndResult, make_front_end
+from .frontend import PRESSURE_NAMES, FrontEnd, FrontEndResult, make_front_end
 from .samples import FrictionEstimate, PhysicalSample, Status
 
 _new_tuple = tuple.__new__
@@ -74,7 +74,11 @@ class Pipeline:
         self.output_codec = OutputCodec(output_db)
         messages = self.input_codec.input_messages()
         trigger = next(m.name for m in messages if m.frame_id == self.input_codec.trigger_id)
-        self.front_end: FrontEnd = make_front_end(config.vehicle, config.frontend, messages, trigger)
+        # A car that sends only its master-cylinder pressure maps it to all four wheels.
+        pressure_sources = {(config.signals[n].message, config.signals[n].signal)
+                            for n in PRESSURE_NAMES if n in config.signals}
+        self.front_end: FrontEnd = make_front_end(config.vehicle, config.frontend, messages, trigger,
+                                                  pressures_are_master=len(pressure_sources) == 1)
         self.trigger_message = trigger
         self.estimator = estimator if estimator is not None else make_estimator(config, self.front_end.sample_period_s)
         self.stats = PipelineStats()

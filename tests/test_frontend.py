@@ -25,8 +25,9 @@ MESSAGES = {
 PERIODS = {"WHEELS": 0.01, "ACCEL": 0.01, "PRESS": 0.01, "REF": 0.01}
 
 
-def make(options: FrontEndOptions | None = None, messages=MESSAGES) -> FrontEnd:
-    return FrontEnd(VEH, options or FrontEndOptions(), messages, {m: PERIODS.get(m, 0.01) for m in messages}, "WHEELS")
+def make(options: FrontEndOptions | None = None, messages=MESSAGES, pressures_are_master: bool = False) -> FrontEnd:
+    return FrontEnd(VEH, options or FrontEndOptions(), messages, {m: PERIODS.get(m, 0.01) for m in messages}, "WHEELS",
+                    pressures_are_master)
 
 
 class Drive:
@@ -216,7 +217,7 @@ def test_brake_gain_is_learnt_within_a_stop_and_survives_a_non_finite_sample():
     feed(fe, drive, duration=0.5)
     assert fe.brake_gain_factor == pytest.approx(1 / 1.2, rel=0.04)
     learnt = fe.brake_gain_factor
-    fe._update_brake_gain(-drive.decel, 20.0, [0.0] * 4, [500.0, 500.0, 200.0, float("nan")], [0.0] * 4)
+    fe._update_brake_gain(-drive.decel, 20.0, [0.0] * 4, [500.0, 500.0, 200.0, float("nan")], [0.0] * 4, [20.0] * 4)
     assert fe.brake_gain_factor == learnt
 
 
@@ -356,3 +357,109 @@ def test_a_trigger_arriving_at_another_rate_than_its_dbc_cycle_time_is_noticed()
     right = FrontEnd(VEH, FrontEndOptions(), MESSAGES, {m: 0.02 for m in MESSAGES}, "WHEELS")
     feed_at(right, drive, 4.0, 0.02)
     assert right.measured_period_s == pytest.approx(0.02, rel=0.05) and not right.period_mismatch()
+
+
+class StopDrive(Drive):
+    """`Drive` until standstill, then held at rest by the brakes (no deceleration, pressure kept)."""
+
+    def speed(self, t):
+        return max(self.v0 - self.decel * t, 0.0)
+
+    def accel(self, t):
+        return -self.decel if self.speed(t) > 0 else 0.0
+
+
+def feed_stop(fe: FrontEnd, drive: StopDrive, duration: float, pressure_scale: float = 1.0) -> list:
+    results = []
+    for k in range(int(duration / 0.01)):
+        t = k * 0.01
+        w = drive.speed(t) * (1 - drive.slip) / VEH.wheel_radius if drive.speed(t) > 0 else 0.0
+        for name, values in (("WHEELS", dict(zip(WHEEL_SPEED_NAMES, (w,) * 4))),
+                             ("ACCEL", {"accel_long": drive.accel(t), "accel_lat": 0.0, "yaw_rate": 0.0}),
+                             ("PRESS", dict(zip(PRESSURE_NAMES, (drive.pressure * pressure_scale,) * 4)))):
+            r = fe.push(t + 0.001 * len(results) % 0.001, name, values)
+            if r is not None:
+                results.append(r)
+    return results
+
+
+def _needed_pressure(decel: float, slip: float, speed: float) -> float:
+    """The pressure whose brake torques give `decel` (configured gains, drag and inertia)."""
+    inertia = 4 * VEH.wheel_inertia * decel * (1 - slip) / VEH.wheel_radius**2
+    force = VEH.mass * decel - VEH.drag_area_coefficient * speed**2 - inertia
+    return force * VEH.wheel_radius / (2 * VEH.brake_gain_front + 2 * VEH.brake_gain_rear) + VEH.brake_pushout_pressure
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_car_held_at_rest_by_its_brakes_is_no_fault(compiled):
+    # Stopping hard, then standing with the pedal down: no deceleration for 100 bar of pressure is
+    # what brakes holding a car do, not a pressure signal gone wrong.
+    drive = StopDrive(v0=8.0, decel=8.0, slip=0.05)
+    drive.pressure = _needed_pressure(8.0, 0.05, 4.0)
+    fe = make()
+    if not compiled:
+        fe.core = None
+    results = feed_stop(fe, drive, duration=3.0, pressure_scale=1.0)
+    at_rest = [r for r in results if r.sample is not None and r.sample.time_s > 1.5]
+    assert len(at_rest) > 100
+    assert all(r.fault is None for r in results)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_one_master_pressure_for_all_wheels_under_abs_leaves_the_torques_unknown(compiled):
+    # The master cylinder at twice what the car's deceleration needs: with per-wheel pressures
+    # that is a wrong signal (a fault); with the master mapped to every wheel it is the ABS
+    # releasing wheels, and no wheel's μ may be computed from the master's torque.
+    drive = Drive(v0=25.0, decel=6.0, slip=0.08)
+    drive.pressure = 2.0 * _needed_pressure(6.0, 0.08, 22.0)
+    per_wheel, master = make(), make(pressures_are_master=True)
+    for fe in (per_wheel, master):
+        if not compiled:
+            fe.core = None
+    late = [r for r in feed(per_wheel, drive, duration=1.0) if r.sample is not None and r.sample.time_s > 0.5]
+    assert any(r.fault == "brake pressure disagrees with deceleration" for r in late)
+    late = [r for r in feed(master, drive, duration=1.0) if r.sample is not None and r.sample.time_s > 0.5]
+    assert len(late) > 30
+    assert all(r.fault is None for r in late)
+    assert not any(any(r.sample.usable) for r in late)
+    # The same master pressure where it matches the deceleration: the wheels' μ is used.
+    drive.pressure = _needed_pressure(6.0, 0.08, 22.0)
+    master.reset()
+    late = [r for r in feed(master, drive, duration=1.0) if r.sample is not None and r.sample.time_s > 0.5]
+    assert all(all(r.sample.usable) for r in late)
+
+
+class CyclingPressureDrive(Drive):
+    """`Drive` whose pressure reading swings around the true one by ±`swing` every 40 ms: an ABS
+    cycling on ice seen through a lagging sensor (ahead while it dumps, behind while it applies)."""
+
+    def __init__(self, swing: float, **kw):
+        super().__init__(**kw)
+        self.base, self.swing, self._k = 0.0, swing, 0
+
+    @property
+    def pressure(self):
+        self._k += 1
+        return self.base * (1.0 + self.swing * (1 if (self._k // 4) % 2 else -1))
+
+    @pressure.setter
+    def pressure(self, value):
+        self.base = value
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_pressures_lagging_an_abs_cycle_are_no_fault_but_a_factor_is(compiled):
+    # On ice the brake torques are of the order of the wheels' inertia torques, and a lagging
+    # sensor reads ±60 % off through each cycle: sample by sample the pressures "disagree",
+    # over the cycles they do not. Steady pressures off by a factor of 2.5 do.
+    drive = CyclingPressureDrive(0.6, v0=20.0, decel=1.0, slip=0.03)
+    drive.pressure = _needed_pressure(1.0, 0.03, 19.0)
+    fe = make()
+    if not compiled:
+        fe.core = None
+    results = feed(fe, drive, duration=1.5)
+    assert len(results) > 100 and all(r.fault is None for r in results)
+    fe.reset()
+    drive.swing = 0.0
+    drive.pressure = 2.5 * _needed_pressure(1.0, 0.03, 19.0)
+    assert any(r.fault == "brake pressure disagrees with deceleration" for r in feed(fe, drive, duration=1.5))

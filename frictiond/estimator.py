@@ -48,7 +48,7 @@ except ImportError:  # pragma: no cover - depends on the install
 from .samples import FrictionEstimate, PhysicalSample, Status
 from .tyre_model import (_SMALL_Z, MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials,
                          braking_mu_and_partials_few, compiled_params, mu_and_jacobian_theta, peaks)
-from .vehicle import VehicleParams
+from .vehicle import GRAVITY_MPS2, VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
 N_WHEELS = 4
@@ -101,7 +101,7 @@ class LugreTROptions:
     excitation_slip_rate: float = 0.3     # 1/s: a stop's first evidence of the peak needs a wheel running away
     excitation_relative_slip_rate: float = 5.0   # ... or its slip growing at this many times itself per second
     excitation_runaway_elasticity: float = 0.3   # ... while μ grows by at most this share of the slip's relative growth
-    excitation_runaway_decel: float = 1.0        # m/s²: ... and the wheel decelerating this much faster than the car
+    excitation_runaway_decel: float = 1.5        # ... and the wheel decelerating faster than the car by this × μ·g
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
@@ -1330,11 +1330,11 @@ class LugreTrustRegionEstimator:
             # the grip on wet), but there μ rises in proportion.
             # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
             # And in sliding speed, not only in slip: at walking pace the speed estimate's noise,
-            # divided by a small speed, makes slip "grow" at rates a runaway shows at speed; a wheel
-            # past its peak decelerates faster than the car by (T_brake − R·F_peak)·R/J, above a
-            # m/s² on any road but the most polished ice.
+            # divided by a small speed, makes slip "grow" at rates a runaway shows at speed. Past
+            # its peak a wheel decelerates faster than the car by (T_brake − R·F_peak)·R/J; with
+            # F_z·R²/J ≈ 25 g per unit of μ on cars, 1.5 μ·g is a brake torque 6 % past the peak.
             needed = max(min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi),
-                         o.excitation_runaway_decel / max(speed, 1.0))
+                         o.excitation_runaway_decel * GRAVITY_MPS2 * max(mu_hi, 0.0) / max(speed, 1.0))
             if not runaway_rate >= needed:
                 return "slip not running away", 0.0, True
         if lam_hi * speed < o.excitation_min_sliding_mps:

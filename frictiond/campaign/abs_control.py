@@ -7,10 +7,11 @@ and returns per wheel a hydraulic command: the pressure to move to and the rate 
 every ABS hands the wheels back to the driver's pressure, as real ones do.
 
 Families (`ABS_FAMILIES`):
-- "a-threshold": slip thresholds with a *slow* dump: dump at `dump_rate` (150–400 bar/s) when
-  slip > `slip_high` until slip < `slip_low`, then re-apply fast. The slow dump lets the slip
-  run deep (0.6–1.0 briefly on a peaky curve): old or cheap systems, and a stress test of the
-  estimator's handling of the far side of the curve.
+- "a-threshold": slip thresholds with a *slow* dump: when slip > `slip_high` the pressure
+  decays exponentially (time constant `dump_tau_s`, 40–100 ms, against a few ms for a fast
+  dump) until slip < `slip_low`, then re-applies fast. The slow dump lets the slip run deep
+  (0.6–1.0 briefly, tens of ms, on a peaky curve): old or cheap systems, and a stress test of
+  the estimator's handling of the far side of the curve.
 - "b-decel": wheel-deceleration triggered: fast dump when the wheel's circumferential
   deceleration exceeds the car's by `decel_dump` with slip > `slip_min` (or slip > `slip_guard`),
   hold while the wheel
@@ -96,7 +97,7 @@ class AbsController:
         elif self._mode[i] == DUMP and slip < prm["slip_low"]:
             self._set(i, APPLY, t)
         if self._mode[i] == DUMP:
-            return WheelCommand(0.0, prm["dump_rate"], True)
+            return WheelCommand(0.0, max(p / prm["dump_tau_s"], 20.0), True)
         return WheelCommand(driver, prm["apply_rate"], self._ever_active[i])
 
     def _decel(self, i: int, t: float, slip: float, p: float, driver: float, _peak: float) -> WheelCommand:

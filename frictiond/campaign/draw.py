@@ -25,7 +25,8 @@ Tyres (never LuGre: the estimator's own model is not a truth)
 
 ABS (see abs_control.py): "a-threshold" 27 %, "b-decel" 27 %, "c-slip" 27 %, "d-none" 19 %;
 controller cycle 5–10 ms, cut-out below 1.5–3 m/s
-- a: slip_high 0.20–0.35, slip_low 0.05–0.12, slow dump 150–400 bar/s, apply 800–2,000 bar/s
+- a: slip_high 0.20–0.35, slip_low 0.05–0.12, slow dump (exponential, τ 40–100 ms), apply
+  800–2,000 bar/s
 - b: wheel decel beyond the car's by 4–10 m/s² with slip > 0.03–0.08, slip guard 0.20–0.35, dump 1,500–3,000 bar/s,
   spin-up 1–4 m/s² (relative to the car),
   hold ≤ 50–150 ms, slow re-apply 100–400 bar/s
@@ -206,7 +207,7 @@ def _draw_abs_params(rng: np.random.Generator) -> dict[str, dict[str, float]]:
     """Parameters of every family (drawn always, in one order: forcing a family keeps the rest)."""
     u = rng.uniform
     return {
-        "a-threshold": {"slip_high": u(0.20, 0.35), "slip_low": u(0.05, 0.12), "dump_rate": u(150.0, 400.0),
+        "a-threshold": {"slip_high": u(0.20, 0.35), "slip_low": u(0.05, 0.12), "dump_tau_s": u(0.04, 0.10),
                         "apply_rate": u(800.0, 2000.0)},
         "b-decel": {"decel_dump": u(4.0, 10.0), "slip_min": u(0.03, 0.08), "slip_guard": u(0.20, 0.35), "dump_rate": u(1500.0, 3000.0),
                     "spin_up": u(1.0, 4.0), "hold_max_s": u(0.05, 0.15), "reapply_rate": u(100.0, 400.0),

@@ -35,6 +35,7 @@ WHEELS = ("fl", "fr", "rl", "rr")
 TRUTH_EVERY = 10                 # truth rows every 10 steps (10 ms at 1 kHz)
 V_EPS_MPS = 1.0                  # slip's denominator floor for the force (regularised near standstill)
 STANDSTILL_MPS = 0.05
+RELAXATION_MIN_SPEED_MPS = 5.0  # the relaxation time σ/v is σ/5 m/s at most
 BRAKING_MIN_SPEED_MPS = 0.5      # `braking` in the truth: pedal applied and the car still rolling
 AFTER_STOP_S = 0.3
 AFTER_RELEASE_S = 0.5
@@ -191,7 +192,9 @@ class _Integrator:
             mu, dmu = self.models[surfaces[i]](lam, g)
             f_ss = mu * fz[i]
             k = fz[i] * dmu * (-r / den)                  # dF/dω
-            a = dt * max(g, 0.5) / relax if relax > 0.0 else math.inf
+            # σ/v grows without bound towards standstill; real tyres stop relaxing there (the
+            # patch sticks), and a lag of seconds would make the wheel an undamped oscillator.
+            a = dt * max(g, RELAXATION_MIN_SPEED_MPS) / relax if relax > 0.0 else math.inf
             if math.isinf(a):
                 f_eff, k_eff = f_ss, k
             else:

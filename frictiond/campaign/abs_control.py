@@ -13,8 +13,8 @@ Families (`ABS_FAMILIES`):
   (0.6–1.0 briefly, tens of ms, on a peaky curve): old or cheap systems, and a stress test of
   the estimator's handling of the far side of the curve.
 - "b-decel": wheel-deceleration triggered: fast dump when the wheel's circumferential
-  deceleration exceeds the car's by `decel_dump` with slip > `slip_min` (or slip > `slip_guard`),
-  hold while the wheel
+  deceleration exceeds the car's by `decel_dump` with slip > `slip_min` (or slip > `slip_guard`);
+  the deceleration alone, at smaller slip, only holds the pressure; hold while the wheel
   spins up, then slow re-apply (`reapply_rate`) until the next trigger: the classic Bosch-style
   cycle (its "−a" threshold, relative to the reference deceleration).
 - "c-slip": continuous slip control holding `target_frac` × the true peak slip (capped at
@@ -30,7 +30,7 @@ from typing import Sequence
 
 ABS_FAMILIES = ("a-threshold", "b-decel", "c-slip", "d-none")
 
-APPLY, DUMP, HOLD, REAPPLY = range(4)
+APPLY, DUMP, HOLD, REAPPLY, HOLD_A = range(5)
 
 
 @dataclass
@@ -104,13 +104,19 @@ class AbsController:
         prm = self.params
         acc = self._wheel_accel[i]
         mode = self._mode[i]
-        # The −a trigger needs some slip too: a pressure step alone decelerates the wheel hard for
-        # a few ms while a relaxing tyre builds up its force (Bosch pairs −a with a λ threshold).
-        triggered = acc < -prm["decel_dump"] and slip > prm["slip_min"]
-        if mode in (APPLY, REAPPLY) and (triggered or slip > prm["slip_guard"]):
+        # −a alone holds the pressure; −a with slip beyond `slip_min` (or slip beyond the guard)
+        # dumps (Bosch's phases 2 and 3): a soft tyre decelerates its wheel hard on a pressure
+        # rise long before its peak, and a relaxing tyre does for a few ms on every step.
+        decelerating = acc < -prm["decel_dump"]
+        if mode in (APPLY, REAPPLY, HOLD_A) and (decelerating and slip > prm["slip_min"] or slip > prm["slip_guard"]):
             self._set(i, DUMP, t)
             self._ever_active[i] = True
             self._seen_spin_up[i] = False
+        elif mode in (APPLY, REAPPLY) and decelerating:
+            self._set(i, HOLD_A, t)
+            self._ever_active[i] = True
+        elif mode == HOLD_A and acc > -0.3 * prm["decel_dump"]:
+            self._set(i, REAPPLY, t)
         elif mode == DUMP and acc > -0.3 * prm["decel_dump"] and slip < prm["slip_guard"]:
             self._set(i, HOLD, t)
         elif mode == HOLD:
@@ -122,7 +128,7 @@ class AbsController:
         mode = self._mode[i]
         if mode == DUMP:
             return WheelCommand(0.0, prm["dump_rate"], True)
-        if mode == HOLD:
+        if mode in (HOLD, HOLD_A):
             return WheelCommand(p, 0.0, True)
         if mode == REAPPLY:
             return WheelCommand(driver, prm["reapply_rate"], True)
@@ -133,7 +139,7 @@ class AbsController:
         target = min(prm["target_frac"] * peak, prm["target_cap"])
         if not self._controlling[i]:
             # Pre-control: the pedal's fast rise is taken over before the target, not after it.
-            if slip <= 0.6 * target:
+            if slip <= 0.5 * target:
                 return WheelCommand(driver, prm["apply_rate"], False)
             self._controlling[i] = True
             self._ever_active[i] = True
@@ -142,7 +148,7 @@ class AbsController:
         # bar) as on dry asphalt (100+ bar).
         err = target - slip
         pc = self._p_ctrl[i] * math.exp(max(min(prm["gain"] * err * self.cycle_s, 0.3), -0.5))
-        if slip > target + 0.05:       # well past the target: halve at once (a safety dump)
+        if slip > target + 0.04:       # well past the target: halve at once (a safety dump)
             pc = 0.5 * p
         self._p_ctrl[i] = min(max(pc, 1.0), driver)
         return WheelCommand(self._p_ctrl[i], prm["valve_rate"], True)

@@ -33,7 +33,8 @@ controller cycle 5–10 ms, cut-out below 1.5–3 m/s
 - c: target 0.70–0.95 × the true peak slip, capped at 0.09–0.12, log-pressure gain 60–150
 - ABS stops: driver demand 1.3–2.0 × the pressure that locks the harder-to-lock axle on the
   grippiest surface (≤ 280 bar), pedal 300–1,500 bar/s
-- d: moderate braking to standstill: the demand that uses 25–60 % of the lowest peak, and
+- d: moderate braking to standstill, on roads whose every peak is ≥ 0.15 (redrawn otherwise):
+  the demand that uses 25–60 % of the lowest peak (at least 0.1 g when 60 % allows), and
   never more than the curve gives at 3.5 % slip; pedal 50–200 bar/s; the initial speed is
   lowered (not below 20 km/h) so that the stop takes ≤ 12 s at that deceleration
 
@@ -49,7 +50,7 @@ Sensors (see sensors.py)
   0.0625, noise σ 0–0.1 km/h; accelerations and pressures at 50 or 100 Hz each
 - reception jitter ± 0–2 ms, frame loss 0–2 % per message
 - accelerometer offset ± 0–0.3 m/s² (lateral ± 0–0.2), noise σ 0.02–0.15 m/s²
-- pressure sensor lag 0–40 ms, offset ± 0–2 bar, noise σ 0.1–0.6 bar
+- pressure sensor lag 0–40 ms, offset ± 0–1 bar, noise σ 0.1–0.6 bar
 - 20 % of cars send only the master-cylinder pressure (no per-wheel pressures)
 - 15 % have a ground-speed sensor; ABS flags: none 40 %, global 30 %, per wheel 30 %
 """
@@ -71,6 +72,7 @@ MANOEUVRES = ("straight", "jump", "split", "cornering", "release")
 WHEEL_RATES_HZ = (50, 83, 100)
 WHEEL_RESOLUTIONS_KMH = (0.01, 0.015625, 0.02, 0.03125, 0.05, 0.0625)
 JUMPS = ("dry-wet", "wet-dry", "to-ice")
+D_MIN_PEAK = 0.15
 
 
 @dataclass(frozen=True)
@@ -228,7 +230,7 @@ def _draw_sensors(rng: np.random.Generator) -> SensorSpec:
         jitter_s=u(0.0, 0.002), drop_rate=u(0.0, 0.02),
         accel_offset_mps2=sign[0] * u(0.0, 0.3), accel_lat_offset_mps2=sign[1] * u(0.0, 0.2),
         accel_noise_mps2=u(0.02, 0.15),
-        pressure_lag_s=u(0.0, 0.04), pressure_offset_bar=sign[2] * u(0.0, 2.0), pressure_noise_bar=u(0.1, 0.6),
+        pressure_lag_s=u(0.0, 0.04), pressure_offset_bar=sign[2] * u(0.0, 1.0), pressure_noise_bar=u(0.1, 0.6),
         master_only=bool(rng.random() < 0.20), reference_speed=bool(rng.random() < 0.15),
         abs_flags=("none", "global", "wheel")[int(rng.choice(3, p=[0.4, 0.3, 0.3]))],
     )
@@ -248,7 +250,9 @@ def _abs_demand(rng: np.random.Generator, car: CarSpec, surfaces: tuple[TyreCurv
 def _moderate_demand(rng: np.random.Generator, car: CarSpec, surfaces: tuple[TyreCurve, ...],
                      v0: float) -> tuple[float, float]:
     """(pressure, μ used): 25–60 % of the lowest peak, and no more than 3.5 % slip gives."""
-    mu_t = min(min(min(rng.uniform(0.25, 0.60) * _peak_mu(s, v),
+    use = rng.uniform(0.25, 0.60)
+    # at least 0.1 g where 60 % of the peak allows it: firm enough for the pressures to matter
+    mu_t = min(min(min(max(use * _peak_mu(s, v), min(0.1, 0.6 * _peak_mu(s, v))),
                        float(s.mu(0.035, v))) for v in (0.0, 0.5 * v0, v0)) for s in surfaces)
     m, g, h, l, r = car.true_mass_kg, GRAVITY_MPS2, car.cg_height_m, car.wheelbase_m, car.wheel_radius_m
     front_wheel = 0.5 * m * (g * car.cg_to_rear_m + h * mu_t * g) / l
@@ -274,6 +278,9 @@ def draw_stop(seed: int, family: str | None = None) -> StopSpec:
     abs_family, tyre_family, manoeuvre = _apply_family(choices, family)
     car = _draw_car(car_rng)
     surfaces, jump_kind = _draw_surfaces(tyre_rng, tyre_family, manoeuvre)
+    while abs_family == "d-none" and min(s.peak[0] for s in surfaces) < D_MIN_PEAK:
+        # A moderate stop on ice is a few bar on the pedal, below the pressure sensors' offset.
+        surfaces, jump_kind = _draw_surfaces(tyre_rng, tyre_family, manoeuvre)
     relaxation = tyre_rng.uniform(0.10, 0.60) if tyre_rng.random() < 0.35 else 0.0
     abs_params = _draw_abs_params(abs_rng)[abs_family]
     abs_cycle, cutout = abs_rng.uniform(0.005, 0.010), abs_rng.uniform(1.5, 3.0)

@@ -79,6 +79,8 @@ def target_rows(rows: Sequence[Row], p: str) -> list[tuple[str, str, str, bool]]
          low_utilisation_valid(allr, p) == 0),
         ("4 FAULT without injected fault", f"{sum(1 for r in allr if r[f'{p}_faults'] > 0)} stops", "0",
          all(r[f"{p}_faults"] == 0 for r in allr)),
+        ("4 … of them FAULT above 2 m/s", f"{sum(1 for r in allr if r[f'{p}_faults_moving'] > 0)} stops", "0",
+         all(r[f"{p}_faults_moving"] == 0 for r in allr)),
         ("4 pipeline crashes", f"{sum(1 for r in allr if r[f'{p}_crash'])} stops", "0",
          not any(r[f"{p}_crash"] for r in allr)),
     ]

@@ -27,6 +27,7 @@ from .simulate import CampaignStop, simulate_stop
 ESTIMATORS = {"lugre": "lugre-tr", "rls": "burckhardt-rls"}   # row prefix → estimator.kind
 CALIBRATION_LEVELS = (0.5, 0.6, 0.7, 0.8, 0.9)
 UTILISATION_SHOWN = 0.8
+MOVING_MPS = 2.0     # FAULTs above this true speed are counted apart (`faults_moving`)
 WHEELS = ("fl", "fr", "rl", "rr")
 
 
@@ -59,6 +60,10 @@ def estimator_scores(estimates: Sequence[FrictionEstimate], truth: list[dict[str
         "span_truth": rep.mean_truth,
         "faults": sum(1 for e in estimates if e.status == Status.FAULT), "crash": "",
     }
+    speed = np.array([r["speed_mps"] for r in truth])
+    fault_t = [e.time_s for e in estimates if e.status == Status.FAULT]
+    at = np.clip(np.searchsorted(t_truth, fault_t), 0, len(t_truth) - 1)
+    out["faults_moving"] = int((speed[at] > MOVING_MPS).sum()) if fault_t else 0
     valid = [e for e in estimates if e.status == Status.VALID]
     if valid:
         idx = np.clip(np.searchsorted(t_truth, [e.time_s for e in valid]), 0, len(t_truth) - 1)
@@ -79,7 +84,7 @@ def _crashed(exc: BaseException) -> dict[str, Any]:
     where = f" at {last.filename.rsplit('/', 1)[-1]}:{last.lineno}" if last else ""
     out: dict[str, Any] = {"mae": math.inf, "mae_rel": math.inf, "valid_share": 0.0, "conv_s": math.inf,
                            "reconv_s": math.nan, "false_valid": 0, "valid": 0, "outputs": 0, "span_truth": math.nan,
-                           "faults": 0, "crash": f"{type(exc).__name__}: {exc}"[:200] + where}
+                           "faults": 0, "faults_moving": 0, "crash": f"{type(exc).__name__}: {exc}"[:200] + where}
     for c in CALIBRATION_LEVELS:
         out[f"cal_n_{int(c * 100)}"] = out[f"cal_ok_{int(c * 100)}"] = 0
     return out

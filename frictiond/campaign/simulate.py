@@ -28,7 +28,7 @@ from ..frames import Frame
 from .abs_control import AbsController, WheelCommand
 from .draw import StopSpec
 from .sensors import bus_dbc_text, sensor_events, signal_map
-from .tyres import scalar_model
+from .tyres import scalar_model, scalar_speed_factor
 from .vehicle import GRAVITY_MPS2, normal_loads
 
 WHEELS = ("fl", "fr", "rl", "rr")
@@ -115,7 +115,7 @@ class _Integrator:
         self.dt = spec.dt_s
         self.models = [scalar_model(c) for c in spec.surfaces]
         self.peaks = [c.peak for c in spec.surfaces]
-        self.speed_factor = [c.speed_factor for c in spec.surfaces]
+        self.speed_factor = [scalar_speed_factor(c) for c in spec.surfaces]
         self.abs = AbsController(spec.abs_family, dict(spec.abs_params), spec.abs_cycle_s, spec.abs_cutout_mps)
         self.abs_every = max(1, int(round(spec.abs_cycle_s / spec.dt_s)))
         self.v = spec.speed0_mps
@@ -207,7 +207,13 @@ class _Integrator:
             if w_new < 0.0:          # a locked wheel: the brake holds it, it does not turn back
                 w_new = 0.0
             dw = w_new - w
-            self.force[i] = f_eff + k_eff * dw
+            force = f_eff + k_eff * dw
+            if relax > 0.0:
+                # The lag is the carcass's; the patch still slides at the road's limit (a wheel
+                # that runs onto ice loses its force at once, not over σ of travel).
+                limit = self.peaks[surfaces[i]][0] * self.speed_factor[surfaces[i]](g) * fz[i]
+                force = min(max(force, -limit), limit)
+            self.force[i] = force
             self.omega[i] = w_new
             omega_dot[i] = dw / dt
         return omega_dot

@@ -106,13 +106,20 @@ def slip_for_force(curve: TyreCurve, mu_wanted: float, speed_mps: float) -> floa
     return float(SLIP_GRID[idx[0]]) if len(idx) else curve.peak[1]
 
 
-def scalar_model(curve: TyreCurve) -> Callable[[float, float], tuple[float, float]]:
-    """(λ, v) → (μ, dμ/dλ) in plain floats for the 1 kHz integration (numpy on four numbers a
-    step costs more than the arithmetic). Odd in λ: traction slip gives a driving force."""
+def scalar_speed_factor(curve: TyreCurve) -> Callable[[float], float]:
+    """m(v) in plain floats."""
     k_v = curve.speed_slope
 
     def factor(v: float) -> float:
         return min(max(1.0 + k_v * (v - SPEED_REF_MPS) / SPEED_REF_MPS, SPEED_FACTOR_MIN), SPEED_FACTOR_MAX)
+
+    return factor
+
+
+def scalar_model(curve: TyreCurve) -> Callable[[float, float], tuple[float, float]]:
+    """(λ, v) → (μ, dμ/dλ) in plain floats for the 1 kHz integration (numpy on four numbers a
+    step costs more than the arithmetic). Odd in λ: traction slip gives a driving force."""
+    factor = scalar_speed_factor(curve)
 
     if curve.kind == "burckhardt":
         c1, c2, c3 = curve.params
@@ -146,4 +153,4 @@ def relaxation_time_s(length_m: float, speed_mps: float) -> float:
 
 
 __all__ = ["BURCKHARDT_SURFACES", "TyreCurve", "magic_formula_plausible", "slip_for_force",
-           "scalar_model", "relaxation_time_s"]
+           "scalar_model", "scalar_speed_factor", "relaxation_time_s"]

@@ -27,7 +27,8 @@ ABS (see abs_control.py): "a-threshold" 27 %, "b-decel" 27 %, "c-slip" 27 %, "d-
 controller cycle 5–10 ms, cut-out below 1.5–3 m/s
 - a: slip_high 0.20–0.35, slip_low 0.05–0.12, slow dump (exponential, τ 40–100 ms), apply
   800–2,000 bar/s
-- b: wheel decel beyond the car's by 4–10 m/s² with slip > 0.03–0.08, slip guard 0.20–0.35, dump 1,500–3,000 bar/s,
+- b: wheel decel beyond the car's by 6–14 m/s² with slip > 0.05–0.10 (the decel alone
+  holds), slip guard 0.20–0.35, dump 1,500–3,000 bar/s,
   spin-up 1–4 m/s² (relative to the car),
   hold ≤ 50–150 ms, slow re-apply 100–400 bar/s
 - c: target 0.70–0.95 × the true peak slip, capped at 0.09–0.12, log-pressure gain 60–150
@@ -211,7 +212,7 @@ def _draw_abs_params(rng: np.random.Generator) -> dict[str, dict[str, float]]:
     return {
         "a-threshold": {"slip_high": u(0.20, 0.35), "slip_low": u(0.05, 0.12), "dump_tau_s": u(0.04, 0.10),
                         "apply_rate": u(800.0, 2000.0)},
-        "b-decel": {"decel_dump": u(4.0, 10.0), "slip_min": u(0.03, 0.08), "slip_guard": u(0.20, 0.35), "dump_rate": u(1500.0, 3000.0),
+        "b-decel": {"decel_dump": u(6.0, 14.0), "slip_min": u(0.05, 0.10), "slip_guard": u(0.20, 0.35), "dump_rate": u(1500.0, 3000.0),
                     "spin_up": u(1.0, 4.0), "hold_max_s": u(0.05, 0.15), "reapply_rate": u(100.0, 400.0),
                     "apply_rate": u(800.0, 2000.0)},
         "c-slip": {"target_frac": u(0.70, 0.95), "target_cap": u(0.09, 0.12), "gain": u(60.0, 150.0),

@@ -223,7 +223,7 @@ def _draw_abs_params(rng: np.random.Generator) -> dict[str, dict[str, float]]:
 
 def _draw_sensors(rng: np.random.Generator) -> SensorSpec:
     u = rng.uniform
-    sign = rng.choice([-1.0, 1.0], size=3)
+    sign = [float(x) for x in rng.choice([-1.0, 1.0], size=3)]   # plain floats: the spec prints and dumps cleanly
     return SensorSpec(
         wheel_hz=int(rng.choice(WHEEL_RATES_HZ)), accel_hz=int(rng.choice((50, 100))),
         pressure_hz=int(rng.choice((50, 100))),

@@ -194,3 +194,51 @@ def test_the_dask_runner_gives_the_sequential_rows():
     sequential = run_campaign(seeds, workers=0)
     keys = ("seed", "family", "lugre_valid", "lugre_false_valid", "rls_valid", "max_utilisation")
     assert [[r[k] for k in keys] for r in parallel] == [[r[k] for k in keys] for r in sequential]
+
+
+def _row(seed: int, **over) -> dict:
+    """A campaign row where both estimators meet every target (then changed by `over`)."""
+    row = {"seed": seed, "family": "c-slip/burckhardt/straight", "abs": "c-slip", "tyre": "burckhardt",
+           "manoeuvre": "straight", "surfaces": "dry_asphalt", "speed0_kmh": 80.0, "max_utilisation": 1.0,
+           "max_slip": 0.1, "sim_error": "", "sim_cpu_s": 0.1}
+    for p in ("lugre", "rls"):
+        row.update({f"{p}_mae": 0.01, f"{p}_mae_rel": 0.01, f"{p}_valid_share": 0.95, f"{p}_conv_s": 0.2,
+                    f"{p}_false_valid": 0, f"{p}_valid": 100, f"{p}_span_truth": 1.0, f"{p}_faults": 0,
+                    f"{p}_faults_moving": 0, f"{p}_crash": "", f"{p}_cpu_s": 0.05})
+        for c in (50, 60, 70, 80, 90):
+            row[f"{p}_cal_n_{c}"], row[f"{p}_cal_ok_{c}"] = 100, 95
+    row.update(over)
+    return row
+
+
+def test_the_target_table_passes_and_fails_on_the_issue_thresholds():
+    good = [_row(s) for s in range(40)]
+    assert all(met for *_x, met in target_rows(good, "lugre"))
+    # one false VALID in 4,000 VALID outputs (0.025 %) passes; 30 (0.75 %) fail
+    assert target_rows(good[:-1] + [_row(99, lugre_false_valid=1)], "lugre")[4][3]
+    assert not target_rows(good[:-1] + [_row(99, lugre_false_valid=30)], "lugre")[4][3]
+    # a moderate stop with a VALID output though no wheel neared its peak
+    low = good + [_row(100, abs="d-none", max_utilisation=0.5, lugre_valid=3)]
+    assert not target_rows(low, "lugre")[5][3] and target_rows(low, "lugre")[0][3]
+    # 3 of 40 ABS stops (7.5 %) with MAE 0.06: below 95 %; a FAULT anywhere fails target 4
+    worse = good[3:] + [_row(s, lugre_mae=0.06) for s in range(3)]
+    assert not target_rows(worse, "lugre")[0][3]
+    assert not target_rows(good[1:] + [_row(0, lugre_faults=1)], "lugre")[6][3]
+    # calibration: 85 % within 10 % passes c ≤ 0.8, fails 0.9
+    cal = [_row(s, lugre_cal_ok_90=85, lugre_cal_ok_80=85) for s in range(40)]
+    rows = target_rows(cal, "lugre")
+    assert rows[-2][3] and not rows[-1][3]
+
+
+def test_the_reproduce_command_prints_scores_and_replay_commands(tmp_path, capsys):
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "campaign.py"
+    spec = importlib.util.spec_from_file_location("campaign_cli", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.main(["--reproduce", "1000002", "--write-log", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    assert "seed 1000002:" in out and "lugre-tr" in out and "burckhardt-rls" in out
+    assert f"frictiond replay {tmp_path / 'd' / 'stop.log'} --config" in out
+    assert (tmp_path / "d" / "truth.csv").read_text().startswith("time_s,")

@@ -37,7 +37,12 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     # about starting workers are noise on a command's stderr. The workers' statistical profiler
     # (a stack sample of the running task every 10 ms, for the dashboard nobody sees) is off: it
     # takes the GIL from CPU-bound tasks (the nannies pass this config on to the workers).
-    with dask.config.set({"distributed.worker.profile.enabled": False}):
+    # Nor do the workers' allocators hand freed memory back to the OS at every 64 KiB (Dask's
+    # MALLOC_TRIM_THRESHOLD_, meant for workers holding large arrays): a replay allocates and
+    # frees small objects all the time, and the trimming cost its workers 7-9 % more CPU per log
+    # than the same replay in a plain process (measured with benchmarks/fleet.py).
+    with dask.config.set({"distributed.worker.profile.enabled": False,
+                          "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": str(256 << 20)}):
         cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                                dashboard_address=None, silence_logs=logging.ERROR)
     with cluster, Client(cluster) as client:

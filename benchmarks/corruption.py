@@ -1,0 +1,190 @@
+"""Corrupted input frames against clean ABS stops (issue 22).
+
+Each stop is replayed clean, then with 1, 3, 5 and 10 % of its input frames corrupted in each way of
+`frictiond.corruption.KINDS` (random payloads, a bit flip in one signal, short DLC, 0xFF/0x00
+markers, duplicates, reordering, single frames stepped 1 s back or ahead, a second node replaying
+one message at the same rate). Outputs are judged as a receiver decodes them off the bus
+(`faults.replay_on_bus`). Per kind and rate:
+
+- false VALID: VALID outputs more than 20 % off the truth, share of all VALID outputs;
+- ΔMAE: the VALID outputs' mean absolute error less the same stop's clean run's (worst stop);
+- coverage: VALID outputs / the clean run's (lowest stop);
+- FAULT: share of outputs with status FAULT;
+- frames corrupted, crashes, outputs with NaN/inf.
+
+    python benchmarks/corruption.py [--stops 8] [--kinds 'random payload,bit flip'] [--rates 0.05]
+
+Stops come from the randomised campaign (`frictiond.campaign`) when it is installed, else from the
+simulator's ABS scenarios.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import default_config  # noqa: E402
+
+from frictiond.corruption import KINDS, corrupt  # noqa: E402
+from frictiond.faults import replay_on_bus  # noqa: E402
+from frictiond.samples import Status  # noqa: E402
+from frictiond.sim_frames import input_codec_for, simulate_frames  # noqa: E402
+
+RATES = (0.01, 0.03, 0.05, 0.10)
+SIM_SCENARIOS = ("dry", "wet", "snow", "cobblestone_wet", "split_mu", "noisy", "loaded", "cornering")
+
+
+@dataclass
+class Stop:
+    name: str
+    frames: list
+    truth: Callable[[float], float]
+    config: object
+
+
+def _truth_of(t: np.ndarray, mu: np.ndarray) -> Callable[[float], float]:
+    return lambda time_s: float(mu[min(int(np.searchsorted(t, time_s)), len(t) - 1)])
+
+
+def simulator_stops(config, n: int) -> list[Stop]:
+    stops = []
+    for k in range(n):
+        scenario = SIM_SCENARIOS[k % len(SIM_SCENARIOS)]
+        seed = 1 + k // len(SIM_SCENARIOS)
+        frames, sim = simulate_frames(config, scenario, seed=seed)
+        rows = sim.truth.rows()
+        t = np.array([r["time_s"] for r in rows])
+        mu = np.array([r["mu_max"] for r in rows])
+        stops.append(Stop(f"{scenario}/{seed}", frames, _truth_of(t, mu), config))
+    return stops
+
+
+def campaign_stops(n: int) -> list[Stop] | None:
+    """ABS stops of the randomised campaign (None when the branch is not merged)."""
+    try:
+        from frictiond import campaign  # type: ignore[attr-defined]
+    except ImportError:
+        return None
+    stops = []
+    seed = 0
+    while len(stops) < n and seed < 50 * n:
+        spec = campaign.draw_stop(seed)
+        seed += 1
+        result = campaign.simulate_stop(spec)
+        frames, truth, config = result.frames, result.truth, result.config
+        t = np.asarray(truth.time_s if hasattr(truth, "time_s") else [r["time_s"] for r in truth], dtype=float)
+        mu = np.asarray(truth.mu_max if hasattr(truth, "mu_max") else [r["mu_max"] for r in truth], dtype=float)
+        stops.append(Stop(f"campaign/{seed - 1}/{getattr(spec, 'family', '')}", list(frames), _truth_of(t, mu), config))
+    return stops
+
+
+@dataclass
+class Outcome:
+    valid: int = 0
+    false_valid: int = 0
+    abs_error: float = 0.0
+    outputs: int = 0
+    faults: int = 0
+    bad: int = 0
+    crashed: bool = False
+    reasons: dict = field(default_factory=dict)
+
+    @property
+    def mae(self) -> float:
+        return self.abs_error / self.valid if self.valid else math.nan
+
+
+def judge(stop: Stop, frames: list, original_time: Callable[[float], float] = lambda t: t) -> Outcome:
+    out = Outcome()
+    try:
+        pipeline, estimates, bad = replay_on_bus(stop.config, frames)
+    except Exception:  # noqa: BLE001 - a crash is a result here
+        out.crashed = True
+        return out
+    out.bad = len(bad)
+    out.outputs = len(estimates)
+    for e in estimates:
+        out.faults += e.status == Status.FAULT
+        if e.status != Status.VALID:
+            continue
+        mu = stop.truth(original_time(e.time_s))
+        err = abs(e.mu_max - mu)
+        out.valid += 1
+        out.abs_error += err
+        out.false_valid += err > 0.2 * mu
+    out.reasons = dict(pipeline.stats.faults)
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--stops", type=int, default=8)
+    parser.add_argument("--kinds", default=",".join(KINDS))
+    parser.add_argument("--rates", default=",".join(str(r) for r in RATES))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--simulator", action="store_true", help="the simulator's scenarios even if the campaign is there")
+    args = parser.parse_args(argv)
+    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
+    rates = [float(r) for r in args.rates.split(",")]
+    config = default_config()
+    stops = None if args.simulator else campaign_stops(args.stops)
+    source = "campaign" if stops else "simulator"
+    stops = stops or simulator_stops(config, args.stops)
+    started = time.perf_counter()
+    clean = [judge(s, s.frames) for s in stops]
+    print(f"{len(stops)} ABS stops ({source}); clean: {sum(c.valid for c in clean)} VALID outputs, "
+          f"false VALID {sum(c.false_valid for c in clean)}, MAE {np.nanmean([c.mae for c in clean]):.4f}")
+    header = (f"{'kind':18} {'rate':>5} {'false VALID':>11} {'ΔMAE worst':>10} {'ΔMAE mean':>9} "
+              f"{'coverage min':>12} {'cov mean':>8} {'FAULT':>6} {'frames':>7} {'crash':>5} {'NaN':>4}")
+    print(header)
+    total_frames = crashes = nan = 0
+    for kind in kinds:
+        for rate in rates:
+            row = _row(stops, clean, kind, rate, args.seed)
+            total_frames += row["frames"]
+            crashes += row["crashes"]
+            nan += row["nan"]
+            print(f"{kind:18} {rate:5.0%} {row['false']:11.2%} {row['dmae_worst']:+10.4f} {row['dmae_mean']:+9.4f} "
+                  f"{row['cov_min']:12.2f} {row['cov_mean']:8.2f} {row['fault']:6.2%} {row['frames']:7d} "
+                  f"{row['crashes']:5d} {row['nan']:4d}", flush=True)
+    print(f"corrupted frames in all: {total_frames}; crashes: {crashes}; outputs with NaN/inf: {nan}; "
+          f"{time.perf_counter() - started:.0f} s")
+    return 0
+
+
+def _row(stops: list[Stop], clean: list[Outcome], kind: str, rate: float, seed: int) -> dict:
+    valid = false = faults = outputs = frames_n = crashes = nan = 0
+    dmae, cov = [], []
+    for k, (stop, base) in enumerate(zip(stops, clean)):
+        codec = input_codec_for(stop.config)
+        frames, n = corrupt(kind, stop.frames, codec, rate, seed=seed + 1000 * k)
+        frames_n += n
+        shift = 1.0 if kind == "clock step back" else -1.0 if kind == "clock step ahead" else 0.0
+        # (an output stamped with a stepped frame's time is judged at the stop's own time)
+        end = stop.frames[-1].time_s
+        o = judge(stop, frames, lambda t: t + shift if shift and (t > end + 0.5 or t < stop.frames[0].time_s - 0.5) else t)
+        crashes += o.crashed
+        nan += o.bad
+        valid += o.valid
+        false += o.false_valid
+        faults += o.faults
+        outputs += o.outputs
+        if base.valid:
+            cov.append(o.valid / base.valid)
+            if o.valid:
+                dmae.append(o.mae - base.mae)
+    return {"false": false / valid if valid else 0.0, "dmae_worst": max(dmae) if dmae else math.nan,
+            "dmae_mean": float(np.mean(dmae)) if dmae else math.nan, "cov_min": min(cov) if cov else math.nan,
+            "cov_mean": float(np.mean(cov)) if cov else math.nan, "fault": faults / outputs if outputs else 0.0,
+            "frames": frames_n, "crashes": crashes, "nan": nan}
+
+
+if __name__ == "__main__":
+    sys.exit(main())

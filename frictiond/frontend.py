@@ -35,6 +35,7 @@ except ImportError:  # pragma: no cover - depends on the install
     compiled_front = None
 
 from .abs_activity import ABS_FLAG_NAMES, MASTER_PRESSURE_NAME, AbsActivity
+from .plausibility import InputGate
 from .samples import PhysicalSample
 from .vehicle import GRAVITY_MPS2, VehicleParams
 
@@ -210,6 +211,8 @@ class FrontEnd:
         for m in message_signals:
             self._history.setdefault(m, _MessageHistory(options.default_period))
         self._required_histories = tuple((m, self._history[m]) for m in sorted(self.required_messages))
+        # What each required message is called in a fault (its first canonical signal's kind).
+        self._fault_names = {m: _input_label(message_signals[m]) for m in self.required_messages}
         # One wheel-speed sample per trigger: the per-sample constants (the derivative window,
         # the forgetting of the brake-gain and accelerometer-offset learning) are set for the
         # trigger's cycle time, not for 10 ms. A 7-sample window at 20 ms spans 0.12 s, over
@@ -265,6 +268,8 @@ class FrontEnd:
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
         n = self.derivative_window
+        # Frame-level plausibility (issue 22): a corrupted frame never reaches the histories.
+        self.gate = InputGate(self.vehicle, {m: h.period_s for m, h in self._history.items()})
         self._abs_activity.reset()
         self._wheel_times: deque[float] = deque(maxlen=n)
         self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
@@ -329,13 +334,22 @@ class FrontEnd:
         history = self._history.get(message)
         if history is None:
             return None
-        if message == self.trigger_message:
+        is_trigger = message == self.trigger_message
+        if is_trigger:
             dt = time_s - self._last_trigger_s
             if -self.options.reorder_window < dt < 1e-4:
                 # A repeated or slightly out-of-order wheel-speed frame (gateways and log
                 # splices do this): skip it rather than restart the derivative filter.
                 self.skipped_triggers += 1
+                self.gate.note(time_s, "duplicate" if dt == 0.0 else "out of order")
                 return None
+        if self.gate.admit(time_s, message, values) is not None:
+            # Rejected: no update from a wheel-speed frame that cannot be true, unless they keep
+            # coming (then the input is broken, and the status says so).
+            if not is_trigger:
+                return None
+            fault = self._persistent_fault()
+            return FrontEndResult(None, (), fault) if fault is not None else None
         core = self.core
         if core is not None and type(time_s) is float and type(values) is dict and time_s >= history.last_arrival_s:
             # `_MessageHistory.push`'s compiled path, without its call (once per input frame)
@@ -343,9 +357,18 @@ class FrontEnd:
             history.last_arrival_s = time_s
         else:
             history.push(time_s, values, core)
-        if message != self.trigger_message:
+        if not is_trigger:
+            self.gate.repair_spike(message, history.series)
             return None
         return self._on_trigger(time_s, history)
+
+    def _persistent_fault(self) -> str | None:
+        """A fault naming the required message whose frames keep being rejected, if any."""
+        for message, kind in self.gate.faulty_messages():
+            label = self._fault_names.get(message)
+            if label is not None:
+                return f"{label} {_REJECTION_FAULTS.get(kind, 'implausible')}"
+        return None
 
     def _on_trigger(self, time_s: float, history: _MessageHistory) -> FrontEndResult:
         opts = self.options
@@ -386,12 +409,18 @@ class FrontEnd:
         self._wheel_speeds.append(speeds)  # type: ignore[arg-type]
         if len(self._wheel_times) < self.derivative_window:
             return FrontEndResult(None, stale, None)
+        fault = self._persistent_fault()
+        if fault is not None:
+            return FrontEndResult(None, (), fault)
         if stale:
             return FrontEndResult(None, stale, None)
         result = self._compute_sample(stale)
+        if result.fault == "wheel speed glitch":
+            self.gate.count_repair(result.fault)
         if result.sample is not None:
             self._mark_abs_activity(result.sample)
             self._mark_body_mu(result.sample)
+            result.sample.input_suspect_share = self.gate.suspect_share()
         return result
 
     def _mark_body_mu(self, sample: PhysicalSample) -> None:
@@ -432,7 +461,26 @@ class FrontEnd:
 
     # -- the physics ---------------------------------------------------------------------------
     def _fit_wheels(self) -> tuple[float, list[float], list[float], bool]:
-        """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch).
+        """`_fit_window`, and when it finds a glitch (`_glitch_value`), the sample repaired in the
+        window for good and the fit made again: (t_c, ω(t_c), dω/dt(t_c), glitch)."""
+        fitted = self._fit_window()
+        if not fitted[3]:
+            return fitted
+        k = len(self._wheel_times) - 3
+        times, speeds = self._wheel_times, self._wheel_speeds
+        threshold = self.options.spike_threshold
+        columns = list(zip(*speeds))
+        repaired = []
+        for y in columns:
+            value = _glitch_value(times, y, k, threshold)
+            repaired.append(y[k] if value is None else value)
+        speeds[k] = tuple(repaired)
+        t_c, omega, omega_dot, _ = self._fit_window()
+        return t_c, omega, omega_dot, True
+
+    def _fit_window(self) -> tuple[float, list[float], list[float], bool]:
+        """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch), glitch
+        when one wheel's third-newest sample is a sensor error (`_glitch_value`).
 
         Least squares in closed form on plain floats (the normal equations of a 3-parameter fit
         in the time offset scaled to [−1, 1], so they stay well conditioned): a handful of points
@@ -471,8 +519,7 @@ class FrontEnd:
             return self._fit_wheels_numpy()
         inv = 1.0 / det
         threshold = self.options.spike_threshold
-        # The largest residual only matters against the threshold; it starts at 0.0.
-        glitch = 0.0 > threshold
+        glitch = False
         omega = []
         omega_dot = []
         for y in zip(*self._wheel_speeds):   # each wheel's speeds over the window
@@ -481,12 +528,7 @@ class FrontEnd:
             b2 = sum(map(mul, u2, y))
             k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv
             k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv
-            k2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv
-            if not glitch:
-                for a, a2, yy in zip(u, u2, y):
-                    if abs(yy - (k0 + k1 * a + k2 * a2)) > threshold:
-                        glitch = True
-                        break
+            glitch = glitch or _glitch_value(times, y, n - 3, threshold) is not None
             omega.append(k0)
             omega_dot.append(k1 / h)
         self._torque_weights = _matched_weights(times, u, (c01 * inv / h, c11 * inv / h, c12 * inv / h))
@@ -504,8 +546,9 @@ class FrontEnd:
         design[:, 1] = tau
         design[:, 2] = tau * tau
         coef, *_ = np.linalg.lstsq(design, speeds, rcond=None)
-        residual = speeds - design @ coef
-        glitch = bool(np.max(np.abs(residual)) > self.options.spike_threshold)
+        k = len(times) - 3
+        glitch = any(_glitch_value(self._wheel_times, y, k, self.options.spike_threshold) is not None
+                     for y in zip(*self._wheel_speeds))
         return t_c, [float(w) for w in coef[0]], [float(a) for a in coef[1]], glitch
 
     # The wheel's angular acceleration comes from the derivative filter, which averages ω̇ over
@@ -853,11 +896,54 @@ class FrontEnd:
         self._brake_model_holds = self._recent_sum_far <= 0.5 * self._recent_sum_tt
 
 
+# The fault a required input's persistently rejected frames give, by kind of rejection.
+_REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
+                     "clock step": "clock step"}
+
+
+def _input_label(signals: Iterable[str]) -> str:
+    """'wheel speed', 'brake pressure' or 'acceleration': what a required message carries."""
+    names = tuple(signals)
+    for prefix, label in (("wheel_speed", "wheel speed"), ("brake_pressure", "brake pressure"),
+                          ("accel", "acceleration")):
+        if any(n.startswith(prefix) for n in names):
+            return label
+    return names[0] if names else "input"
+
+
 # What `_frontcore.sample_physics` builds its results from: the two result types, then the
 # fault messages it can give (those of `_compute_sample`, in this order).
 _PHYSICS_TYPES = (PhysicalSample, FrontEndResult, "acceleration out of range", "brake pressure out of range",
                   "brake pressure implausible", "wheel speed glitch", "wheel speed stuck",
                   "brake pressure disagrees with deceleration")
+
+
+def _glitch_value(times: Any, y: Any, k: int, threshold: float) -> float | None:
+    """What sample `k` of one wheel's speeds `y` should read if it is a sensor glitch, else None.
+
+    A glitch is one sample that disagrees, the same way and by more than `threshold`, with its
+    neighbours' interpolation and with each side's own trend (the line through the two samples
+    before it, and the two after it). A wheel cannot do that: it would need its acceleration to
+    jump and jump back within a sample. A wheel running deep into slip and recovering (an ABS
+    dumping late: 30-50 rad/s lost in 50 ms) turns around at the bottom, but each side of the
+    turn follows its own trend, so it is no glitch; a jump too fast for the torques on the wheel
+    never gets here (`plausibility.InputGate` rejects the frame).
+    (`_frontcore.c`'s `glitch_value` is the same, line by line.)
+    """
+    if k < 2 or k + 2 >= len(y):
+        return None
+    t0, t1, t2, t3, t4 = times[k - 2], times[k - 1], times[k], times[k + 1], times[k + 2]
+    if not t0 < t1 < t2 < t3 < t4:
+        return None
+    y0, y1, y2, y3, y4 = y[k - 2], y[k - 1], y[k], y[k + 1], y[k + 2]
+    between = y1 + (y3 - y1) * (t2 - t1) / (t3 - t1)
+    left = y1 + (y1 - y0) * (t2 - t1) / (t1 - t0)
+    right = y3 - (y4 - y3) * (t3 - t2) / (t4 - t3)
+    da, db, dc = y2 - between, y2 - left, y2 - right
+    if (da > threshold and db > threshold and dc > threshold) or (da < -threshold and db < -threshold
+                                                                   and dc < -threshold):
+        return between
+    return None
 
 
 def _interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:

@@ -57,6 +57,10 @@ _BRAKE_MODEL_WINDOW_S = 0.2                 # ... in most of the braking of abou
 MAX_PRESSURE_BAR = 350.0
 MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 MAX_SPEED_MPS = 120.0
+# Under ABS a wheel's acceleration changes by at most ~800 rad/s² within 10 ms (pressure moving a few
+# thousand bar/s on ~25 N·m/bar over ~1.2 kg·m², and the tyre force past its peak): a sample further
+# than this × dt² off its own trend is suspect until confirmed or repaired.
+SUSPECT_JERK_RADPS3 = 80_000.0
 BODY_WHEELS_TOLERANCE = 0.25   # the body's and the wheels' total force agree within this (pad friction ±20 %)
 
 
@@ -417,6 +421,11 @@ class FrontEnd:
         result = self._compute_sample(stale)
         if result.fault == "wheel speed glitch":
             self.gate.count_repair(result.fault)
+        if result.sample is not None and self._newest_suspect():
+            # A wheel's newest samples are off its own trend by more than a wheel's acceleration
+            # can change: maybe a glitch not yet confirmed (that takes two more samples), whose
+            # weight in the derivative is largest now. Kept from the fit until then.
+            result.sample.usable = (False, False, False, False)
         if result.sample is not None:
             self._mark_abs_activity(result.sample)
             self._mark_body_mu(result.sample)
@@ -477,6 +486,27 @@ class FrontEnd:
         speeds[k] = tuple(repaired)
         t_c, omega, omega_dot, _ = self._fit_window()
         return t_c, omega, omega_dot, True
+
+    def _newest_suspect(self) -> bool:
+        """Whether a wheel's newest sample, or the one before it, leaves the trend of the samples
+        before it by more than `SUSPECT_JERK_RADPS3`·dt² (and, for the one before, its neighbours'
+        interpolation too): a glitch that `_glitch_value` can only confirm two samples later."""
+        times, speeds = self._wheel_times, self._wheel_speeds
+        n = len(times)
+        if n < 4:
+            return False
+        t0, t1, t2, t3 = times[n - 4], times[n - 3], times[n - 2], times[n - 1]
+        if not t0 < t1 < t2 < t3:
+            return False
+        limit = SUSPECT_JERK_RADPS3 * (t3 - t2) ** 2
+        for y0, y1, y2, y3 in zip(speeds[n - 4], speeds[n - 3], speeds[n - 2], speeds[n - 1]):
+            if abs(y3 - (y2 + (y2 - y1) * (t3 - t2) / (t2 - t1))) > limit:
+                return True
+            trend = y1 + (y1 - y0) * (t2 - t1) / (t1 - t0)
+            between = y1 + (y3 - y1) * (t2 - t1) / (t3 - t1)
+            if abs(y2 - trend) > limit and abs(y2 - between) > limit:
+                return True
+        return False
 
     def _fit_window(self) -> tuple[float, list[float], list[float], bool]:
         """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch), glitch

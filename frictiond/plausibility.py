@@ -40,9 +40,10 @@ MAX_PRESSURE_RATE_BAR_S = 6000.0
 # No tyre on any road transmits more than this share of its load.
 MAX_POSSIBLE_MU = 1.5
 # Body jerk [m/s³]: a hard brake onset is ~50-100; the rest is a rough road's vibration (noise).
-MAX_JERK_MPS3 = 300.0
+MAX_JERK_MPS3 = 200.0
 FRAMES_TO_FOLLOW_A_CLOCK_STEP = 6   # consecutive frames that agree on a new time base
 CLOCK_STEP_S = 0.25                 # a frame this far from the bus's time is a clock step
+REORDER_S = 0.05                    # ... or this far behind its message's last frame
 EARLY_SHARE_OF_PERIOD = 0.7         # sooner than this share of the cycle: a second source
 FLOOD_RATE_FACTOR = 2.25            # more frames than this many times the message's rate: a flood
 SHARE_TIME_CONSTANT_S = 1.0         # `suspect_share` averages over about this long
@@ -78,8 +79,8 @@ def wheel_accel_bound(vehicle: VehicleParams, wheel: int) -> float:
 def signal_limits(vehicle: VehicleParams) -> dict[str, SignalLimit]:
     """The limits of every canonical input that has them (flags have none)."""
     limits = {
-        "accel_long": SignalLimit(-30.0, 30.0, MAX_JERK_MPS3, 1.5, 2.5),
-        "accel_lat": SignalLimit(-30.0, 30.0, MAX_JERK_MPS3, 1.5, 2.5),
+        "accel_long": SignalLimit(-30.0, 30.0, MAX_JERK_MPS3, 1.0, 2.0),
+        "accel_lat": SignalLimit(-30.0, 30.0, MAX_JERK_MPS3, 1.0, 2.0),
         # (a car's yaw rate: at most ~1 rad/s, changing at most ~10 rad/s² in a spin)
         "yaw_rate": SignalLimit(-3.0, 3.0, 10.0, 0.05, 0.1),
         "vehicle_speed_ref": SignalLimit(0.0, 120.0, 2.0 * GRAVITY_MPS2, 0.5, 1.0),
@@ -193,9 +194,10 @@ class InputGate:
         if not math.isfinite(time_s):
             return "clock step"
         bus = self._bus_time_s
-        if bus > -math.inf and abs(time_s - bus) > CLOCK_STEP_S:
-            # Far from every other message's time: one stepped frame, or the clock stepped.
-            # Followed once enough frames in a row agree on the new time base.
+        if bus > -math.inf and (abs(time_s - bus) > CLOCK_STEP_S or track.time_s - time_s > REORDER_S):
+            # Far from every other message's time, or well behind the message's own last frame:
+            # one stepped frame, or the clock stepped. Followed once enough frames in a row
+            # agree on the new time base.
             if self._step_frames and abs(time_s - self._step_base_s) <= CLOCK_STEP_S:
                 self._step_frames += 1
             else:

@@ -100,7 +100,7 @@ def _reorder(frames: list[Frame], ids: frozenset[int], rate: float, seed: int) -
 
 
 def _spoof(frames: list[Frame], codec: InputCodec, rate: float, seed: int) -> tuple[list[Frame], int]:
-    """A second node sends one input message at its own rate, half a period out of phase, in
+    """A second node sends one input message at its own rate, at a random phase, in
     bursts of 0.2 s, with that message's payloads from 0.5 s earlier (a replay: every value is
     plausible on its own). Bursts are added until `rate` × the input frames are spoofed."""
     rng = random.Random(seed)
@@ -117,9 +117,13 @@ def _spoof(frames: list[Frame], codec: InputCodec, rate: float, seed: int) -> tu
     spoofed: list[Frame] = []
     t_lo, t_hi = times[0] + 0.5, times[-1] - 0.2
     tries = 0
+    busy: list[float] = []
     while len(spoofed) < wanted and t_hi > t_lo and tries < 1000:
         tries += 1
         start = rng.uniform(t_lo, t_hi)
+        if any(abs(start - b) < 0.25 for b in busy):
+            continue    # (one second node: its bursts do not overlap)
+        busy.append(start)
         k = 0
         t = start
         while t < start + 0.2 and len(spoofed) < wanted:

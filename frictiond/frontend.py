@@ -347,13 +347,21 @@ class FrontEnd:
                 self.skipped_triggers += 1
                 self.gate.note(time_s, "duplicate" if dt == 0.0 else "out of order")
                 return None
-        if self.gate.admit(time_s, message, values) is not None:
-            # Rejected: no update from a wheel-speed frame that cannot be true, unless they keep
-            # coming (then the input is broken, and the status says so).
-            if not is_trigger:
+        rejected = self.gate.admit(time_s, message, values)
+        if rejected is not None:
+            # Rejected: no sample from a wheel-speed frame that cannot be true (the last estimate
+            # is repeated), a fault when they keep coming; nothing at all for a frame whose time
+            # is not the bus's (an output must not carry it).
+            if not is_trigger or rejected in _NO_OUTPUT:
                 return None
-            fault = self._persistent_fault()
-            return FrontEndResult(None, (), fault) if fault is not None else None
+            return FrontEndResult(None, (), self._persistent_fault())
+        if message in self.gate.reanchored:
+            # Followed to a new level the physics could not reach (a sensor back from a dead
+            # spell): the derivative window must not straddle the step.
+            self.gate.reanchored.discard(message)
+            if is_trigger:
+                self._wheel_times.clear()
+                self._wheel_speeds.clear()
         core = self.core
         if core is not None and type(time_s) is float and type(values) is dict and time_s >= history.last_arrival_s:
             # `_MessageHistory.push`'s compiled path, without its call (once per input frame)
@@ -418,14 +426,22 @@ class FrontEnd:
             return FrontEndResult(None, (), fault)
         if stale:
             return FrontEndResult(None, stale, None)
+        speed_before = (self._speed_estimate_mps, self._speed_time_s)
+        suspect = self._newest_suspect() or self.gate.contested(time_s)
+        learnt = [getattr(self, name) for name in _LEARNT_STATE] if suspect else None
         result = self._compute_sample(stale)
         if result.fault == "wheel speed glitch":
             self.gate.count_repair(result.fault)
-        if result.sample is not None and self._newest_suspect():
+        if learnt is not None:
+            for name, value in zip(_LEARNT_STATE, learnt):
+                setattr(self, name, value)
+        if result.sample is not None and suspect:
             # A wheel's newest samples are off its own trend by more than a wheel's acceleration
             # can change: maybe a glitch not yet confirmed (that takes two more samples), whose
-            # weight in the derivative is largest now. Kept from the fit until then.
+            # weight in the derivative is largest now. Kept from the fit until then; so are the
+            # samples while a second node sends one of the inputs.
             result.sample.usable = (False, False, False, False)
+            self._coast_speed(speed_before, result.sample.time_s)
         if result.sample is not None:
             self._mark_abs_activity(result.sample)
             self._mark_body_mu(result.sample)
@@ -486,6 +502,20 @@ class FrontEnd:
         speeds[k] = tuple(repaired)
         t_c, omega, omega_dot, _ = self._fit_window()
         return t_c, omega, omega_dot, True
+
+    def _coast_speed(self, before: tuple[float | None, float | None], time_s: float) -> None:
+        """The speed estimate carried over a suspect sample by the accelerometer alone: a
+        corrupted or spoofed wheel speed pulls it up (a wheel faster than the estimate), and under
+        ABS nothing pulls it down again for the rest of the stop (every slip would read high)."""
+        v, t = before
+        if v is None or t is None or self._speed_time_s is None or self._speed_estimate_mps is None:
+            return
+        accel = self._value("accel_long", time_s)
+        if accel is None or not math.isfinite(accel) or not 0.0 < time_s - t <= self.options.max_gap:
+            return
+        coasted = min(max(v + (accel - self._accel_bias_mps2) * (time_s - t), 0.0), MAX_SPEED_MPS)
+        # (only ever down to it: a reference sensor or a slower wheel may have said less)
+        self._speed_estimate_mps = min(self._speed_estimate_mps, coasted)
 
     def _newest_suspect(self) -> bool:
         """Whether a wheel's newest sample, or the one before it, leaves the trend of the samples
@@ -926,6 +956,12 @@ class FrontEnd:
         self._brake_model_holds = self._recent_sum_far <= 0.5 * self._recent_sum_tt
 
 
+# Rejections of a trigger frame that give no output at all (its time is not the bus's).
+_NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
+# What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
+# must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
+_LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_sum_tt", "_recent_sum_far", "_brake_gain_factor",
+                 "_brake_model_holds", "_accel_bias_mps2", "_accel_bias_samples")
 # The fault a required input's persistently rejected frames give, by kind of rejection.
 _REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
                      "clock step": "clock step"}

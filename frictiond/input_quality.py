@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import math
 
-FREE_SHARE = 0.02
+FREE_SHARE = 0.03
 LEAVE_VALID_SHARE = 0.08
 RETURN_VALID_SHARE = 0.06
-FACTOR_AT_LEAVE = 0.7
+FACTOR_AT_LEAVE = 0.8
 CAPPED_CONFIDENCE = 0.3
 REASON = "corrupt input"
 

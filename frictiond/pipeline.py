@@ -170,7 +170,9 @@ class Pipeline:
         elif result.sample is None:
             # Filter warming up (start, or after a gap): repeat what we last said.
             prev = self.last_estimate
-            if prev is None or prev.status in (Status.INPUT_STALE, Status.FAULT):
+            # (not after a silence: a VALID from before it is no estimate of the road now)
+            silent = time_s - self._last_output_s > self.config.frontend.max_gap
+            if prev is None or prev.status in (Status.INPUT_STALE, Status.FAULT) or silent:
                 estimate = self._held_estimate(
                     time_s, Status.INIT if self._last_valid is None else Status.NOT_EXCITED
                 )

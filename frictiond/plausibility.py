@@ -39,19 +39,22 @@ MAX_BRAKE_PRESSURE_BAR = 250.0
 MAX_PRESSURE_RATE_BAR_S = 6000.0
 # No tyre on any road transmits more than this share of its load.
 MAX_POSSIBLE_MU = 1.5
+MAX_DRIVE_TORQUE_NM = 2000.0        # a drive line's torque at one wheel (traction spinning it up)
+REANCHOR_FRAMES = 5                 # rejected frames in a row that agree with each other: a new level
 # Body jerk [m/s³]: a hard brake onset is ~50-100; the rest is a rough road's vibration (noise).
 MAX_JERK_MPS3 = 200.0
 FRAMES_TO_FOLLOW_A_CLOCK_STEP = 6   # consecutive frames that agree on a new time base
 CLOCK_STEP_S = 0.25                 # a frame this far from the bus's time is a clock step
 REORDER_S = 0.05                    # ... or this far behind its message's last frame
 EARLY_SHARE_OF_PERIOD = 0.7         # sooner than this share of the cycle: a second source
+CONTEST_S = 0.1                     # samples this long after a second source's frame are not fitted
 FLOOD_RATE_FACTOR = 2.25            # more frames than this many times the message's rate: a flood
 SHARE_TIME_CONSTANT_S = 1.0         # `suspect_share` averages over about this long
 # Kinds of rejection that are certain and carry no wrong value (an exact repeat, a frame of a
 # regular stream arriving late, a frame the codec cannot read, a timestamp a second off):
 # counted, not in the suspect share. What is left (out of range, rate, spike, second source,
 # a wheel-speed glitch) says that values near the plausible are corrupted too, and some get through.
-HARMLESS = frozenset({"duplicate", "out of order", "undecodable", "clock step"})
+HARMLESS = frozenset({"duplicate", "out of order", "undecodable", "clock step", "second source"})
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,16 +66,18 @@ class SignalLimit:
     rate: float       # largest physical |dx/dt| [unit/s]
     noise: float      # allowance per frame on top (sensor noise, quantisation, jitter)
     spike: float = math.inf   # a value off both (agreeing) neighbours by more than this is a spike
+    rise: float = math.nan    # largest dx/dt upwards when it differs from `rate` [unit/s]
 
 
-def wheel_accel_bound(vehicle: VehicleParams, wheel: int) -> float:
-    """|dω/dt| a wheel can reach [rad/s²]: J ω̇ = −T_b + R F_x with the largest brake torque the
-    hydraulics give and the largest force any road gives at the largest load the car can put on
-    the wheel (1.5 g of braking, 1 g of cornering), both at once."""
+def wheel_accel_bound(vehicle: VehicleParams, wheel: int, up: bool = False) -> float:
+    """|dω/dt| a wheel can reach [rad/s²]: J ω̇ = −T_b + R F_x + T_e with the largest force any
+    road gives at the largest load the car can put on the wheel (1.5 g of braking, 1 g of
+    cornering) and, slowing down, the largest brake torque the hydraulics give on top; speeding
+    up, a brake only holds it back, a drive line adds at most `MAX_DRIVE_TORQUE_NM`."""
     loads = [vehicle.normal_forces(ax * GRAVITY_MPS2, ay * GRAVITY_MPS2)[wheel]
              for ax in (-1.5, 1.5) for ay in (-1.0, 1.0)]
-    torque = (vehicle.brake_gain(wheel) * MAX_BRAKE_PRESSURE_BAR
-              + MAX_POSSIBLE_MU * max(loads) * vehicle.wheel_radius)
+    road = MAX_POSSIBLE_MU * max(loads) * vehicle.wheel_radius
+    torque = road + (MAX_DRIVE_TORQUE_NM if up else vehicle.brake_gain(wheel) * MAX_BRAKE_PRESSURE_BAR)
     return torque / max(vehicle.wheel_inertia, 1e-3)
 
 
@@ -87,7 +92,8 @@ def signal_limits(vehicle: VehicleParams) -> dict[str, SignalLimit]:
         "brake_pressure_master": SignalLimit(-1.0, 350.0, MAX_PRESSURE_RATE_BAR_S, 3.0, 15.0),
     }
     for i, w in enumerate(("fl", "fr", "rl", "rr")):
-        limits[f"wheel_speed_{w}"] = SignalLimit(0.0, 400.0, wheel_accel_bound(vehicle, i), 1.0)
+        limits[f"wheel_speed_{w}"] = SignalLimit(0.0, 400.0, wheel_accel_bound(vehicle, i), 1.0,
+                                                 rise=wheel_accel_bound(vehicle, i, up=True))
         limits[f"brake_pressure_{w}"] = SignalLimit(-1.0, 350.0, MAX_PRESSURE_RATE_BAR_S, 3.0, 15.0)
         # (a motor's torque steps within a few ms: only the range and wild jumps)
         limits[f"drive_torque_{w}"] = SignalLimit(-5000.0, 5000.0, 200_000.0, 200.0)
@@ -98,7 +104,7 @@ class _Track:
     """One message's accepted history as the gate sees it."""
 
     __slots__ = ("period_s", "time_s", "values", "arrival_s", "interval_s", "rejects", "last_reject", "recent",
-                 "arrivals")
+                 "arrivals", "rejected", "agreeing")
 
     def __init__(self, period_s: float) -> None:
         self.period_s = period_s
@@ -110,6 +116,8 @@ class _Track:
         self.last_reject = ""
         self.recent: deque[float] = deque()     # times of the rejections of the last 0.1 s (not harmless)
         self.arrivals: deque[float] = deque()   # times of the frames of the last 0.1 s
+        self.rejected: tuple[float, dict[str, float]] | None = None   # the last frame rejected for its rate
+        self.agreeing = 0                       # ... and how many before it agreed, each with the next
 
 
 class InputGate:
@@ -124,6 +132,8 @@ class InputGate:
         self._step_frames = 0
         self._share_time_s = -math.inf
         self._share_all = self._share_bad = 0.0
+        self._contested_s = -math.inf     # the last frame of a second source
+        self.reanchored: set[str] = set()  # messages followed to a new level (the caller clears)
 
     # -- the suspect share -------------------------------------------------------------------
     def note(self, time_s: float, kind: str | None) -> None:
@@ -166,6 +176,16 @@ class InputGate:
         kind = self._clock(time_s, track, values)
         if kind is None:
             kind = self._values(time_s, track, values)
+            if kind == "rate":
+                # The value moved further than physics allows; several rejected frames in a row
+                # that agree with each other say the last accepted one was wrong (or the sensor
+                # came back from a dead spell): follow them (the front end restarts its filter).
+                agrees = self._agrees(time_s, values, track.rejected)
+                track.rejected = (time_s, dict(values))
+                track.agreeing = track.agreeing + 1 if agrees else 0
+                if track.agreeing >= REANCHOR_FRAMES - 1:
+                    kind = None
+                    self.reanchored.add(message)
         if math.isfinite(time_s) and time_s > track.arrival_s:
             # (all arrivals: a message really sent faster than its DBC says is not a second source)
             if track.arrival_s > -math.inf:
@@ -173,11 +193,18 @@ class InputGate:
                 track.interval_s += (gap - track.interval_s) / 200.0
             track.arrival_s = time_s
         if kind is None:
+            if track.rejected is not None and self._values(track.time_s + track.period_s, track, values) is not None:
+                # Accepted after frames rejected for their rate, and further from the last accepted
+                # value than one cycle allows: a step (the time since only made it admissible).
+                self.reanchored.add(message)
             track.time_s = time_s
             track.values = dict(values)
-            track.rejects = 0
+            track.rejects = track.agreeing = 0
+            track.rejected = None
             self._bus_time_s = max(self._bus_time_s, time_s)
-        elif kind != "second source":
+        elif kind == "second source":
+            self._contested_s = max(self._contested_s, self._bus_time_s)
+        else:
             track.rejects += 1
             track.last_reject = kind
             if kind not in HARMLESS:
@@ -216,7 +243,7 @@ class InputGate:
             return "duplicate"
         if dt <= 0.0 and track.time_s > -math.inf:
             return "out of order"
-        if dt < EARLY_SHARE_OF_PERIOD * min(track.period_s, track.interval_s):
+        if dt < EARLY_SHARE_OF_PERIOD * min(track.period_s, max(track.interval_s, 0.5 * track.period_s)):
             return "second source"
         return None
 
@@ -231,9 +258,33 @@ class InputGate:
             if not lim.low <= x <= lim.high:      # (NaN: out)
                 return "out of range"
             last = previous.get(name)
-            if last is not None and abs(x - last) > lim.rate * dt + lim.noise:
+            if last is None:
+                continue
+            rate = lim.rise if x > last and lim.rise == lim.rise else lim.rate   # (NaN: no own rise)
+            if abs(x - last) > rate * dt + lim.noise:
                 return "rate"
         return None
+
+    def _agrees(self, time_s: float, values: Mapping[str, float], earlier: tuple[float, dict] | None) -> bool:
+        """Whether `values` are within the rate limits of an earlier rejected frame's."""
+        if earlier is None or not time_s > earlier[0]:
+            return False
+        dt = time_s - earlier[0]
+        for name, x in values.items():
+            lim = self.limits.get(name)
+            last = earlier[1].get(name)
+            if lim is None or last is None:
+                continue
+            rate = lim.rise if x > last and lim.rise == lim.rise else lim.rate
+            if not abs(x - last) <= rate * dt + lim.noise:
+                return False
+        return True
+
+    def contested(self, time_s: float) -> bool:
+        """Whether a second node sent one of the messages within `CONTEST_S` before `time_s`:
+        which frames came from it is not certain (one may have been taken before the other
+        was seen), so no sample that may include them is fitted."""
+        return 0.0 <= time_s - self._contested_s <= CONTEST_S
 
     def persistent(self, message: str) -> str | None:
         """The kind of rejection when a message's frames keep being rejected (5 in a row, or 8
@@ -246,7 +297,7 @@ class InputGate:
             return track.last_reject
         if len(track.recent) >= 8:
             return track.last_reject or "rate"
-        if len(track.arrivals) >= FLOOD_RATE_FACTOR * 0.1 / min(track.period_s, track.interval_s):
+        if len(track.arrivals) >= FLOOD_RATE_FACTOR * 0.1 / track.period_s:
             return "second source"
         return None
 

@@ -178,3 +178,26 @@ def test_clean_stops_pass_the_gate_untouched(default_config):
         replay_frames(pipeline, frames)
         counts = pipeline.front_end.gate.counts
         assert sum(counts.values()) == 0, (scenario, dict(counts))
+
+
+def test_the_monitor_counts_rejected_input_and_says_why_not_valid(default_config):
+    from frictiond.codec import OutputCodec, load_databases
+    from frictiond.monitor import MonitorModel
+    from frictiond.monitor_tui import render
+
+    frames, _ = stop(default_config, "wet")
+    codec = input_codec_for(default_config)
+    output = OutputCodec(load_databases([default_config.can.output_dbc]))
+    clean = MonitorModel(output, codec, vehicle=default_config.vehicle)
+    for f in frames:
+        clean.feed(f)
+    assert clean.snapshot().rejected == {} and clean.snapshot().not_valid_reason == ""
+    damaged, _ = corruption.corrupt("random payload", frames, codec, 0.12, seed=3)
+    model = MonitorModel(output, codec, vehicle=default_config.vehicle)
+    for f in damaged:
+        model.feed(f)
+    snap = model.snapshot()
+    assert snap.rejected["rate"] + snap.rejected["out of range"] > 100
+    assert snap.suspect_share > LEAVE_VALID_SHARE and snap.not_valid_reason.startswith("corrupt input")
+    text = "".join(chunk for line in render(snap, 160, 60, unicode=False) for chunk, _ in line)
+    assert "rejected input" in text and "not VALID: corrupt input" in text

@@ -1,0 +1,99 @@
+"""Randomised braking campaign (issue 21): both estimators over random stops, against targets.
+
+    .venv/bin/python benchmarks/campaign.py [--stops 1000] [--set held-out|dev|both] [--workers N]
+        [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--save FILE.json|.parquet] [--worst 15]
+    .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--write-log DIR]
+
+Each stop is drawn from its seed (`frictiond.campaign.draw`, ranges in its docstring): a car,
+tyres (Burckhardt or Magic Formula, never the estimator's LuGre), an ABS family, sensors and a
+manoeuvre; integrated at 1 kHz, put on the bus through the car's own DBC, and replayed through
+the real pipeline once with `lugre-tr` and once with `burckhardt-rls` (the baseline). Stops
+run in chunks on the embedded local Dask cluster (`frictiond.fleet.cluster.open_executor`).
+Development seeds are 0…N−1, held-out seeds 1,000,000…: tune on dev, report held-out.
+Printed: the issue's targets with PASS/FAIL per estimator, the comparison, a table per family,
+distributions, and the worst stops each with the command that reproduces it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from frictiond.campaign.draw import draw_stop, seeds_for
+from frictiond.campaign.logs import replay_commands, write_stop_files
+from frictiond.campaign.report import full_report, reason
+from frictiond.campaign.run import run_campaign, save_rows
+from frictiond.campaign.score import score_stop
+from frictiond.campaign.simulate import simulate_stop
+
+
+def reproduce(seed: int, family: str | None, directory: str | None) -> int:
+    spec = draw_stop(seed, family)
+    stop = simulate_stop(spec)
+    row = score_stop(stop)
+    print(f"seed {seed}: {spec.family}, surfaces {spec.surface_labels}, {spec.speed0_mps * 3.6:.0f} km/h, "
+          f"{len(stop.frames)} frames, max utilisation {row['max_utilisation']:.2f}, max slip {row['max_slip']:.2f}")
+    for p, kind in (("lugre", "lugre-tr"), ("rls", "burckhardt-rls")):
+        print(f"  {kind:15s} {reason(row, p)}  (convergence {row[f'{p}_conv_s']:.2f} s)")
+    print(json.dumps({k: v for k, v in row.items() if not k.startswith(("lugre_cal", "rls_cal"))}, default=str))
+    if directory:
+        paths = write_stop_files(stop, directory)
+        print(f"wrote {', '.join(str(p) for p in paths.values())}")
+        for command in replay_commands(paths):
+            print(f"  {command}")
+    return 0
+
+
+def progress_printer(label: str, started: float):
+    step = {"n": 0}
+
+    def show(done: int, total: int) -> None:
+        if done - step["n"] >= max(total // 10, 1) or done == total:
+            step["n"] = done
+            print(f"  {label}: {done}/{total} stops, {time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
+    return show
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--stops", type=int, default=1000, help="stops per seed set (default 1000)")
+    parser.add_argument("--set", dest="which", default="held-out", choices=("held-out", "dev", "both"))
+    parser.add_argument("--workers", type=int, default=None, help="Dask worker processes (default: one per core; "
+                        "0: sequential in this process)")
+    parser.add_argument("--scheduler", default=None, help="an existing Dask scheduler (tcp://HOST:8786)")
+    parser.add_argument("--chunk", type=int, default=8, help="stops per Dask task")
+    parser.add_argument("--family", default=None, help="force ABS[/TYRE[/MANOEUVRE]] (prefixes, * for any)")
+    parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
+    parser.add_argument("--worst", type=int, default=15)
+    parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
+    parser.add_argument("--write-log", default=None, metavar="DIR", help="with --reproduce: write log, DBC, "
+                        "configs, truth CSV")
+    args = parser.parse_args(argv)
+    if args.reproduce is not None:
+        return reproduce(args.reproduce, args.family, args.write_log)
+    sets = ("dev", "held-out") if args.which == "both" else (args.which,)
+    all_rows = []
+    for which in sets:
+        seeds = seeds_for(which, args.stops)
+        started = time.perf_counter()
+        rows = run_campaign(seeds, workers=args.workers, chunk=args.chunk, family=args.family,
+                            scheduler=args.scheduler, progress=progress_printer(which, started))
+        wall = time.perf_counter() - started
+        cpu = sum(r.get("sim_cpu_s", 0.0) + r.get("lugre_cpu_s", 0.0) + r.get("rls_cpu_s", 0.0) for r in rows)
+        print(f"\n##### {which} seeds {seeds[0]}…{seeds[-1]}: {len(rows)} stops in {wall:.0f} s wall "
+              f"({args.workers if args.workers is not None else os.cpu_count()} workers; CPU per stop "
+              f"{cpu / max(len(rows), 1):.2f} s: simulation + both estimators)\n")
+        print(full_report(rows, f"{which} seeds", args.worst, args.family))
+        for r in rows:
+            r["set"] = which
+        all_rows.extend(rows)
+    if args.save:
+        save_rows(all_rows, args.save, {"stops": args.stops, "sets": list(sets), "family": args.family})
+        print(f"\nsaved {len(all_rows)} rows to {args.save}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,196 @@
+"""The randomised braking campaign (issue 21): its generator, its signatures, its tables."""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from frictiond.campaign import draw as draw_mod
+from frictiond.campaign.abs_control import ABS_FAMILIES
+from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, draw_stop, seeds_for
+from frictiond.campaign.report import full_report, target_rows
+from frictiond.campaign.run import load_rows, run_campaign, save_rows
+from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, WHEEL_MESSAGE
+from frictiond.campaign.simulate import simulate_stop
+from frictiond.campaign.tyres import BURCKHARDT_SURFACES, TyreCurve
+
+CAMPAIGN = Path(draw_mod.__file__).parent
+
+
+def fast_braking(stop):
+    """Trace rows braking 1 m/s above the ABS cut-out (below it every ABS lets the wheels lock)."""
+    tr = stop.trace
+    return (tr.v > stop.spec.abs_cutout_mps + 1.0) & (tr.braking > 0.5)
+
+
+def test_a_seed_is_a_stop():
+    a, b = simulate_stop(draw_stop(1_000_123)), simulate_stop(draw_stop(1_000_123))
+    assert a.frames == b.frames
+    assert a.truth == b.truth
+    other = simulate_stop(draw_stop(1_000_124))
+    assert other.frames != a.frames
+
+
+def test_forcing_a_family_keeps_the_other_draws():
+    free, forced = draw_stop(42), draw_stop(42, "d-none")
+    assert forced.abs_family == "d-none"
+    assert forced.car == free.car and forced.sensors == free.sensors
+    assert draw_stop(42, "*/magic/split").surfaces[0].kind == "magic-formula"
+    with pytest.raises(ValueError):
+        draw_stop(1, "x-unknown")
+
+
+def test_seed_sets_are_disjoint():
+    dev, held = seeds_for("dev", 1000), seeds_for("held-out", 1000)
+    assert dev[0] == 0 and held[0] == HELD_OUT_BASE and not set(dev) & set(held)
+
+
+def test_draws_stay_in_their_documented_ranges():
+    specs = [draw_stop(s) for s in range(400)]
+    for s in specs:
+        car = s.car
+        assert 900 <= car.mass_kg <= 2800 and 0 <= car.payload_kg <= 120
+        assert 2.3 <= car.wheelbase_m <= 3.2 and 0.45 <= car.cg_height_m <= 0.80
+        assert 0.28 <= car.wheel_radius_m <= 0.40 and 0.7 <= car.wheel_inertia_kgm2 <= 2.5
+        assert 0.8 <= car.brake_gain_front / car.config_brake_gain_front <= 1.2
+        assert 0.8 <= car.brake_gain_rear / car.config_brake_gain_rear <= 1.2
+        assert 20 / 3.6 - 1e-9 <= s.speed0_mps <= 160 / 3.6
+        assert s.sensors.wheel_hz in (50, 83, 100) and 0.01 <= s.sensors.wheel_resolution_kmh <= 0.0625
+        for curve in s.surfaces:
+            assert curve.kind in ("burckhardt", "magic-formula")   # never LuGre
+            if curve.kind == "magic-formula":
+                b, c, d, e = curve.params
+                assert 4 <= b <= 14 and 1.2 <= c <= 2.5 and 0.08 <= d <= 1.2 and -1 <= e <= 1
+            else:
+                assert curve.label in BURCKHARDT_SURFACES
+    # every family, manoeuvre and option occurs
+    assert {s.abs_family for s in specs} == set(ABS_FAMILIES)
+    assert {s.manoeuvre for s in specs} == set(MANOEUVRES)
+    assert {s.jump_kind for s in specs if s.manoeuvre == "jump"} == {"dry-wet", "wet-dry", "to-ice"}
+    assert any(s.sensors.master_only for s in specs) and not all(s.sensors.master_only for s in specs)
+    assert any(s.relaxation_m > 0 for s in specs)
+    slopes = [s.surfaces[0].speed_slope for s in specs]
+    assert min(slopes) < -0.1 and max(slopes) > 0.1      # speed dependence of either sign
+    gains = [s.car.brake_gain_front / s.car.config_brake_gain_front for s in specs]
+    assert min(gains) < 0.85 and max(gains) > 1.15
+
+
+def test_the_truth_shares_no_code_with_the_estimator():
+    for path in CAMPAIGN.glob("*.py"):
+        text = path.read_text()
+        assert not re.search(r"(simulator|tyre_model|estimator|trust_region|baseline_rls)\b.*import|"
+                             r"import .*(simulator|tyre_model)", text), path.name
+    # The Burckhardt peak is where c1 c2 e^(−c2 λ) = c3 (dry asphalt: 0.170, μ 1.17)
+    c1, c2, c3 = BURCKHARDT_SURFACES["dry_asphalt"]
+    mu, lam = TyreCurve("burckhardt", (c1, c2, c3)).peak
+    assert lam == pytest.approx(math.log(c1 * c2 / c3) / c2, abs=1e-3)
+    assert mu == pytest.approx(c1 * (1 - c3 / (c1 * c2)) - c3 * lam, abs=1e-4)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_threshold_abs_with_slow_dump_runs_deep(seed):
+    stop = simulate_stop(draw_stop(seed, "a/burckhardt/straight"), keep_trace=True)
+    assert stop.trace.slip[fast_braking(stop)].max() > 0.5
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_deceleration_abs_cycles_below_lock(seed):
+    stop = simulate_stop(draw_stop(seed, "b/burckhardt/straight"), keep_trace=True)
+    sel = fast_braking(stop)
+    assert stop.trace.abs_active[sel].any()
+    assert np.quantile(stop.trace.slip[sel], 0.95) < 0.35
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_slip_control_abs_holds_just_below_the_peak(seed):
+    stop = simulate_stop(draw_stop(seed, "c/burckhardt/straight"), keep_trace=True)
+    sel = fast_braking(stop)
+    slip = stop.trace.slip[sel]
+    util = np.abs(stop.trace.fx[sel]) / (stop.trace.mu_max[sel] * stop.trace.fz[sel])
+    assert np.quantile(slip, 0.99) <= 0.16
+    assert np.quantile(util.max(axis=1), 0.5) > 0.9       # most of the stop near the peak
+
+
+@pytest.mark.parametrize("seed", [0, 1, 4, 5])
+def test_moderate_braking_without_abs_to_standstill(seed):
+    stop = simulate_stop(draw_stop(seed, "d/*/straight"), keep_trace=True)
+    sel = stop.trace.braking > 0.5
+    assert stop.trace.slip[sel & (stop.trace.v > 1.0)].max() <= 0.05
+    assert stop.trace.v[-1] == 0.0 and not stop.trace.abs_active.any()
+    assert max(r["braking"] for r in stop.truth) == 1.0
+
+
+@pytest.mark.parametrize("hz", [50, 83, 100])
+def test_wheel_speeds_arrive_at_the_drawn_rate(hz):
+    spec = draw_stop(7)
+    spec = dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, wheel_hz=hz, drop_rate=0.0))
+    stop = simulate_stop(spec)
+    config = stop.config()
+    wheel_id = 0xB0
+    times = np.array([f.time_s for f in stop.frames if f.can_id == wheel_id])
+    assert np.median(np.diff(times)) == pytest.approx(1.0 / hz, rel=0.05)
+    assert len(times) == pytest.approx(hz * stop.truth[-1]["time_s"], rel=0.03)
+    assert config.signals["wheel_speed_fl"].message == WHEEL_MESSAGE
+
+
+def test_master_cylinder_only_cars_send_no_wheel_pressures():
+    spec = draw_stop(11, "a")
+    for master_only in (True, False):
+        s = dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, master_only=master_only))
+        stop = simulate_stop(s)
+        ids = {f.can_id for f in stop.frames}
+        config = stop.config()
+        sources = {config.signals[f"brake_pressure_{w}"].message for w in ("fl", "fr", "rl", "rr")}
+        if master_only:
+            assert 0xD0 not in ids and 0xD4 in ids and sources == {MASTER_MESSAGE}
+            assert config.signals["brake_pressure_master"].message == MASTER_MESSAGE
+        else:
+            assert 0xD0 in ids and 0xD4 not in ids and sources == {PRESSURE_MESSAGE}
+
+
+def test_a_small_campaign_runs_end_to_end_and_reports(tmp_path):
+    rows = run_campaign(seeds_for("dev", 6), workers=0, chunk=4)
+    assert [r["seed"] for r in rows] == list(range(6))
+    for r in rows:
+        assert not r["sim_error"] and not r["lugre_crash"] and not r["rls_crash"]
+        assert r["lugre_outputs"] > 50 and r["rls_outputs"] == r["lugre_outputs"]
+    text = full_report(rows, "dev seeds", worst=3)
+    for needle in ("== targets", "burckhardt-rls", "== per family", "abs=", "manoeuvre=", "== distributions",
+                   "== worst 3 stops", "python benchmarks/campaign.py --reproduce"):
+        assert needle in text
+    names = [t[0] for t in target_rows(rows, "lugre")]
+    assert len(names) == 14 and names[-1].endswith("0.9")
+    path = tmp_path / "rows.json"
+    save_rows(rows, path)
+    back = load_rows(path)
+    assert back[3]["lugre_mae"] == rows[3]["lugre_mae"] or (math.isinf(rows[3]["lugre_mae"])
+                                                           and math.isinf(back[3]["lugre_mae"]))
+
+
+def test_a_reproduced_stop_replays_from_its_files_as_in_the_campaign(tmp_path):
+    from frictiond.campaign.logs import write_stop_files
+    from frictiond.config import load_config
+    from frictiond.pipeline import Pipeline
+    from frictiond.replay import ReplayRecorder, estimates_of, replay_log
+
+    stop = simulate_stop(draw_stop(1_000_005))
+    paths = write_stop_files(stop, tmp_path / "s")
+    assert {p.name for p in (tmp_path / "s").iterdir()} >= {"stop.log", "campaign.dbc", "truth.csv",
+                                                            "frictiond-lugre-tr.yaml", "frictiond-burckhardt-rls.yaml"}
+    recorder = ReplayRecorder()
+    replay_log(Pipeline(load_config(paths["lugre-tr"])), paths["log"], None, recorder)
+    _, direct = estimates_of(stop.config("lugre-tr"), stop.frames)
+    assert len(recorder.estimates) == len(direct)
+    assert [e.status for e in recorder.estimates] == [e.status for e in direct]
+
+
+def test_the_dask_runner_gives_the_sequential_rows():
+    seeds = [3, 1_000_001]
+    parallel = run_campaign(seeds, workers=1, chunk=1)
+    sequential = run_campaign(seeds, workers=0)
+    keys = ("seed", "family", "lugre_valid", "lugre_false_valid", "rls_valid", "max_utilisation")
+    assert [[r[k] for k in keys] for r in parallel] == [[r[k] for k in keys] for r in sequential]

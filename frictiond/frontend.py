@@ -77,7 +77,9 @@ class FrontEndOptions:
     min_brake_pressure: float = 1.0       # bar above push-out for a wheel to count as braked
     stale_periods: float = 3.0            # an input older than this many periods is stale
     default_period: float = 0.01          # s, when the DBC gives no cycle time
-    spike_threshold: float = 2.0          # rad/s deviation from the local fit that marks a glitch
+    # rad/s a glitch sample is off its neighbours and both sides' trends, on top of what the wheel's
+    # acceleration can change within a sample (`SUSPECT_JERK_RADPS3`·period²; see `_glitch_value`)
+    spike_threshold: float = 2.0
     max_gap: float = 0.25                 # s between wheel-speed frames before the filter restarts
     reorder_window: float = 0.05          # s; an older wheel-speed frame within this is skipped, not a restart
     speed_gain_up: float = 0.3            # observer gain when wheels read faster than the estimate
@@ -226,6 +228,10 @@ class FrontEnd:
         self.declared_period_s = (self._history[trigger_message].period_s if trigger_message in self._history
                                   else options.default_period)
         self.sample_period_s = max(MIN_SAMPLE_PERIOD_S, self.declared_period_s)
+        # A glitch is off its neighbours by more than noise and more than a wheel's acceleration
+        # can change within a sample: at 20 ms (50 Hz wheel speeds) a wheel recovering from deep
+        # slip and overshooting is sampled as a zig-zag of ~10 rad/s on both front wheels alike.
+        self.glitch_threshold = options.spike_threshold + SUSPECT_JERK_RADPS3 * self.sample_period_s ** 2
         self.derivative_window = options.derivative_window or max(
             5, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
         # Each canonical signal's history, looked up once here rather than by message per value.
@@ -493,7 +499,7 @@ class FrontEnd:
             return fitted
         k = len(self._wheel_times) - 3
         times, speeds = self._wheel_times, self._wheel_speeds
-        threshold = self.options.spike_threshold
+        threshold = self.glitch_threshold
         columns = list(zip(*speeds))
         repaired = []
         for y in columns:
@@ -547,7 +553,7 @@ class FrontEnd:
         and four wheels are far too small for numpy's per-call overhead.
         """
         if self.core is not None:
-            fitted = self.core.fit_wheels(self._wheel_times, self._wheel_speeds, self.options.spike_threshold)
+            fitted = self.core.fit_wheels(self._wheel_times, self._wheel_speeds, self.glitch_threshold)
             if fitted is None:
                 self._torque_weights = None
                 return self._fit_wheels_numpy()
@@ -578,7 +584,7 @@ class FrontEnd:
             self._torque_weights = None
             return self._fit_wheels_numpy()
         inv = 1.0 / det
-        threshold = self.options.spike_threshold
+        threshold = self.glitch_threshold
         glitch = False
         omega = []
         omega_dot = []
@@ -607,7 +613,7 @@ class FrontEnd:
         design[:, 2] = tau * tau
         coef, *_ = np.linalg.lstsq(design, speeds, rcond=None)
         k = len(times) - 3
-        glitch = any(_glitch_value(self._wheel_times, y, k, self.options.spike_threshold) is not None
+        glitch = any(_glitch_value(self._wheel_times, y, k, self.glitch_threshold) is not None
                      for y in zip(*self._wheel_speeds))
         return t_c, [float(w) for w in coef[0]], [float(a) for a in coef[1]], glitch
 

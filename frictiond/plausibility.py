@@ -41,12 +41,13 @@ MAX_PRESSURE_RATE_BAR_S = 6000.0
 MAX_POSSIBLE_MU = 1.5
 MAX_DRIVE_TORQUE_NM = 2000.0        # a drive line's torque at one wheel (traction spinning it up)
 REANCHOR_FRAMES = 5                 # rejected frames in a row that agree with each other: a new level
-# Body jerk [m/s³]: a hard brake onset is ~50-100; the rest is a rough road's vibration (noise).
-MAX_JERK_MPS3 = 200.0
+# Body jerk [m/s³]: M Δa = Δ ΣF_x, and an ABS dumping every wheel takes the tyre forces from the
+# peak (up to 1.5 g) to a fraction of it within ~20 ms: ~750 m/s³ (a brake onset alone is 50-100).
+MAX_JERK_MPS3 = 750.0
 FRAMES_TO_FOLLOW_A_CLOCK_STEP = 6   # consecutive frames that agree on a new time base
 CLOCK_STEP_S = 0.25                 # a frame this far from the bus's time is a clock step
 REORDER_S = 0.05                    # ... or this far behind its message's last frame
-EARLY_SHARE_OF_PERIOD = 0.7         # sooner than this share of the cycle: a second source
+EARLY_SHARE_OF_PERIOD = 0.6         # sooner than this share of the cycle: a second source (±2 ms jitter at 10 ms)
 CONTEST_S = 0.1                     # samples this long after a second source's frame are not fitted
 FLOOD_RATE_FACTOR = 2.25            # more frames than this many times the message's rate: a flood
 SHARE_TIME_CONSTANT_S = 1.0         # `suspect_share` averages over about this long

@@ -63,7 +63,7 @@ def test_fit_wheels_matches_the_float_fit_and_refuses_bad_input():
         fe.core = None
         expected = fe._fit_window()   # (the fit alone: `_fit_wheels` also repairs a glitch)
         weights = fe._torque_weights
-        got = core.fit_wheels(list(fe._wheel_times), list(fe._wheel_speeds), fe.options.spike_threshold)
+        got = core.fit_wheels(list(fe._wheel_times), list(fe._wheel_speeds), fe.glitch_threshold)
         assert got[0] == expected[0]
         np.testing.assert_allclose(got[1], expected[1], rtol=1e-12)
         np.testing.assert_allclose(got[2], expected[2], rtol=1e-9, atol=1e-9)

@@ -201,3 +201,20 @@ def test_the_monitor_counts_rejected_input_and_says_why_not_valid(default_config
     assert snap.suspect_share > LEAVE_VALID_SHARE and snap.not_valid_reason.startswith("corrupt input")
     text = "".join(chunk for line in render(snap, 160, 60, unicode=False) for chunk, _ in line)
     assert "rejected input" in text and "not VALID: corrupt input" in text
+
+
+@pytest.mark.parametrize("seed, family", [(3, "a-threshold"), (0, "a-threshold/*/split"), (4, "a-threshold/*/split")])
+def test_campaign_slow_dump_abs_runs_deep_into_slip_without_a_glitch(seed, family):
+    """Issue 21, class 1, on the randomised campaign's slow-dump ABS (wheels at slip 0.6-1.0 for
+    tens of ms; 50 and 100 Hz wheel speeds): before, 81, 168 and 357 "wheel speed glitch" faults
+    and a FAULT status for 83, 201 and 514 outputs; now no glitch, and samples are fitted."""
+    from frictiond.campaign.draw import draw_stop
+    from frictiond.campaign.simulate import simulate_stop
+
+    stop = simulate_stop(draw_stop(seed, family))
+    slips = [max(v for k, v in row.items() if k in ("slip_fl", "slip_fr", "slip_rl", "slip_rr")) for row in stop.truth]
+    assert max(slips) > 0.6
+    pipeline, estimates, bad = replay_on_bus(stop.config(), stop.frames)
+    assert not bad
+    assert pipeline.stats.faults["wheel speed glitch"] == 0 and pipeline.front_end.gate.counts["wheel speed glitch"] == 0
+    assert pipeline.estimator._fits > 50

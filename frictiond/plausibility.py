@@ -177,16 +177,9 @@ class InputGate:
         kind = self._clock(time_s, track, values)
         if kind is None:
             kind = self._values(time_s, track, values)
-            if kind == "rate":
-                # The value moved further than physics allows; several rejected frames in a row
-                # that agree with each other say the last accepted one was wrong (or the sensor
-                # came back from a dead spell): follow them (the front end restarts its filter).
-                agrees = self._agrees(time_s, values, track.rejected)
-                track.rejected = (time_s, dict(values))
-                track.agreeing = track.agreeing + 1 if agrees else 0
-                if track.agreeing >= REANCHOR_FRAMES - 1:
-                    kind = None
-                    self.reanchored.add(message)
+            if kind == "rate" and self._follows_new_level(time_s, track, values):
+                kind = None
+                self.reanchored.add(message)
         if math.isfinite(time_s) and time_s > track.arrival_s:
             # (all arrivals: a message really sent faster than its DBC says is not a second source)
             if track.arrival_s > -math.inf:
@@ -194,29 +187,42 @@ class InputGate:
                 track.interval_s += (gap - track.interval_s) / 200.0
             track.arrival_s = time_s
         if kind is None:
-            if track.rejected is not None and self._values(track.time_s + track.period_s, track, values) is not None:
-                # Accepted after frames rejected for their rate, and further from the last accepted
-                # value than one cycle allows: a step (the time since only made it admissible).
-                self.reanchored.add(message)
-            track.time_s = time_s
-            track.values = dict(values)
-            track.rejects = track.agreeing = 0
-            track.rejected = None
-            self._bus_time_s = max(self._bus_time_s, time_s)
+            self._accept(time_s, message, track, values)
         elif kind == "second source":
             self._contested_s = max(self._contested_s, self._bus_time_s)
         else:
             track.rejects += 1
             track.last_reject = kind
             if kind not in HARMLESS:
-                track.recent.append(time_s)
-        if math.isfinite(time_s):
-            track.arrivals.append(time_s)
+                track.recent.append(self._bus_time_s)
+        # (on the bus's time: a frame stepped back or ahead still arrived now)
+        now = self._bus_time_s
+        track.arrivals.append(now)
         for times in (track.recent, track.arrivals):
-            while times and not time_s - 0.1 < times[0] <= time_s:
+            while times and not now - 0.1 < times[0] <= now:
                 times.popleft()
         self.note(time_s, kind)
         return kind
+
+    def _follows_new_level(self, time_s: float, track: _Track, values: Mapping[str, float]) -> bool:
+        """A value rejected for its rate: whether enough rejected frames in a row agree with each
+        other to say the last accepted one was wrong, or the sensor came back from a dead spell
+        (followed; the front end restarts its filter)."""
+        agrees = self._agrees(time_s, values, track.rejected)
+        track.rejected = (time_s, dict(values))
+        track.agreeing = track.agreeing + 1 if agrees else 0
+        return track.agreeing >= REANCHOR_FRAMES - 1
+
+    def _accept(self, time_s: float, message: str, track: _Track, values: Mapping[str, float]) -> None:
+        if track.rejected is not None and self._values(track.time_s + track.period_s, track, values) is not None:
+            # Accepted after frames rejected for their rate, and further from the last accepted
+            # value than one cycle allows: a step (the time since only made it admissible).
+            self.reanchored.add(message)
+        track.time_s = time_s
+        track.values = dict(values)
+        track.rejects = track.agreeing = 0
+        track.rejected = None
+        self._bus_time_s = max(self._bus_time_s, time_s)
 
     def _clock(self, time_s: float, track: _Track, values: Mapping[str, float]) -> str | None:
         if not math.isfinite(time_s):

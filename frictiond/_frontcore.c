@@ -689,6 +689,20 @@ static int ref_plausible(FEState *s, const double *k, double ref, double fastest
 }
 
 /* FrontEnd._update_speed; `ref_fresh` is `_ref_fresh(time_s)` (the reference is None when absent). */
+/* frontend._second_fastest: the second-largest of the four wheels' speeds */
+static double second_of(const double *wl)
+{
+    double first = -INFINITY, second = -INFINITY;
+    for (int i = 0; i < NW; i++) {
+        if (wl[i] > first) {
+            second = first;
+            first = wl[i];
+        } else if (wl[i] > second)
+            second = wl[i];
+    }
+    return second;
+}
+
 static double update_speed(FEState *s, const double *k, double time_s, const double *wl, double accel_long,
                            int wheels_loaded, int has_ref, double ref, int ref_fresh, int *from_ref)
 {
@@ -713,8 +727,8 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
         v = v + accel_long * dt;
         if (!wheels_loaded) {
             v += k[K_GAIN_FREE] * (mean - v);
-        } else if (fastest > v) {
-            v += py_min(k[K_GAIN_UP] * (fastest - v), MAX_ABS_ACCEL * 0.5 * dt + 0.02);
+        } else if (second_of(wl) > v) {
+            v += py_min(k[K_GAIN_UP] * (second_of(wl) - v), MAX_ABS_ACCEL * 0.5 * dt + 0.02);
         } else {
             const double ceiling = fastest / (1.0 - k[K_MIN_BRAKED_SLIP]);
             if (v > ceiling)

@@ -861,10 +861,12 @@ class FrontEnd:
             v = v + accel_long * dt
             if not wheels_loaded:
                 v += opts.speed_gain_free_rolling * (mean - v)
-            elif fastest > v:
-                # A wheel faster than the estimate pulls it up, but no faster than a car can
-                # gain speed: one corrupt wheel-speed frame must not carry it off.
-                v += min(opts.speed_gain_up * (fastest - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
+            elif _second_fastest(wheel_linear) > v:
+                # Two wheels faster than the estimate pull it up, but no faster than a car can
+                # gain speed: one corrupt wheel speed must not carry it off (under ABS nothing
+                # pulls it down again: each glitch of one wheel ratcheted it up, every slip high).
+                second = _second_fastest(wheel_linear)
+                v += min(opts.speed_gain_up * (second - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
             else:
                 # Braked wheels all read low during ABS: even the least-braked one slips by
                 # several percent, so pulling towards the fastest wheel biases the speed (and
@@ -988,6 +990,11 @@ def _input_label(signals: Iterable[str]) -> str:
 _PHYSICS_TYPES = (PhysicalSample, FrontEndResult, "acceleration out of range", "brake pressure out of range",
                   "brake pressure implausible", "wheel speed glitch", "wheel speed stuck",
                   "brake pressure disagrees with deceleration")
+
+
+def _second_fastest(speeds: list[float]) -> float:
+    """The second-largest of the wheels' speeds (`_frontcore.c`'s `second_of`)."""
+    return sorted(speeds)[-2]
 
 
 def _glitch_value(times: Any, y: Any, k: int, threshold: float) -> float | None:

@@ -48,7 +48,7 @@ FRAMES_TO_FOLLOW_A_CLOCK_STEP = 6   # consecutive frames that agree on a new tim
 CLOCK_STEP_S = 0.25                 # a frame this far from the bus's time is a clock step
 REORDER_S = 0.05                    # ... or this far behind its message's last frame
 EARLY_SHARE_OF_PERIOD = 0.6         # sooner than this share of the cycle: a second source (±2 ms jitter at 10 ms)
-CONTEST_S = 0.1                     # samples this long after a second source's frame are not fitted
+CONTEST_S = 0.15                    # samples this long after a second source's frame are not fitted (a 50 Hz window)
 FLOOD_RATE_FACTOR = 2.25            # more frames than this many times the message's rate: a flood
 SHARE_TIME_CONSTANT_S = 1.0         # `suspect_share` averages over about this long
 # Kinds of rejection that are certain and carry no wrong value (an exact repeat, a frame of a

@@ -432,26 +432,32 @@ class FrontEnd:
             return FrontEndResult(None, (), fault)
         if stale:
             return FrontEndResult(None, stale, None)
-        speed_before = (self._speed_estimate_mps, self._speed_time_s)
-        suspect = self._newest_suspect() or self.gate.contested(time_s)
-        learnt = [getattr(self, name) for name in _LEARNT_STATE] if suspect else None
-        result = self._compute_sample(stale)
+        if self._newest_suspect() or self.gate.contested(time_s):
+            result = self._suspect_sample(stale)
+        else:
+            result = self._compute_sample(stale)
         if result.fault == "wheel speed glitch":
             self.gate.count_repair(result.fault)
-        if learnt is not None:
-            for name, value in zip(_LEARNT_STATE, learnt):
-                setattr(self, name, value)
-        if result.sample is not None and suspect:
-            # A wheel's newest samples are off its own trend by more than a wheel's acceleration
-            # can change: maybe a glitch not yet confirmed (that takes two more samples), whose
-            # weight in the derivative is largest now. Kept from the fit until then; so are the
-            # samples while a second node sends one of the inputs.
-            result.sample.usable = (False, False, False, False)
-            self._coast_speed(speed_before, result.sample.time_s)
         if result.sample is not None:
             self._mark_abs_activity(result.sample)
             self._mark_body_mu(result.sample)
             result.sample.input_suspect_share = self.gate.suspect_share()
+        return result
+
+    def _suspect_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
+        """`_compute_sample` for a suspect sample: a wheel's newest samples are off its own trend
+        by more than a wheel's acceleration can change (maybe a glitch not yet confirmed: that
+        takes two more samples; its weight in the derivative is largest now), or a second node
+        sends one of the inputs. Not fitted, and it teaches the front end nothing: the learnt
+        state is put back and the speed estimate coasts on the accelerometer."""
+        speed_before = (self._speed_estimate_mps, self._speed_time_s)
+        learnt = [getattr(self, name) for name in _LEARNT_STATE]
+        result = self._compute_sample(stale)
+        for name, value in zip(_LEARNT_STATE, learnt):
+            setattr(self, name, value)
+        if result.sample is not None:
+            result.sample.usable = (False, False, False, False)
+            self._coast_speed(speed_before, result.sample.time_s)
         return result
 
     def _mark_body_mu(self, sample: PhysicalSample) -> None:

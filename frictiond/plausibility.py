@@ -68,6 +68,7 @@ class SignalLimit:
     noise: float      # allowance per frame on top (sensor noise, quantisation, jitter)
     spike: float = math.inf   # a value off both (agreeing) neighbours by more than this is a spike
     rise: float = math.nan    # largest dx/dt upwards when it differs from `rate` [unit/s]
+    active: float = math.inf  # |value| above which a frame of zeros after it is an invalid marker
 
 
 def wheel_accel_bound(vehicle: VehicleParams, wheel: int, up: bool = False) -> float:
@@ -85,7 +86,7 @@ def wheel_accel_bound(vehicle: VehicleParams, wheel: int, up: bool = False) -> f
 def signal_limits(vehicle: VehicleParams) -> dict[str, SignalLimit]:
     """The limits of every canonical input that has them (flags have none)."""
     limits = {
-        "accel_long": SignalLimit(-30.0, 30.0, MAX_JERK_MPS3, 1.0, 2.0),
+        "accel_long": SignalLimit(-30.0, 30.0, MAX_JERK_MPS3, 1.0, 2.0, active=0.5),
         "accel_lat": SignalLimit(-30.0, 30.0, MAX_JERK_MPS3, 1.0, 2.0),
         # (a car's yaw rate: at most ~1 rad/s, changing at most ~10 rad/s² in a spin)
         "yaw_rate": SignalLimit(-3.0, 3.0, 10.0, 0.05, 0.1),
@@ -94,11 +95,22 @@ def signal_limits(vehicle: VehicleParams) -> dict[str, SignalLimit]:
     }
     for i, w in enumerate(("fl", "fr", "rl", "rr")):
         limits[f"wheel_speed_{w}"] = SignalLimit(0.0, 400.0, wheel_accel_bound(vehicle, i), 1.0,
-                                                 rise=wheel_accel_bound(vehicle, i, up=True))
-        limits[f"brake_pressure_{w}"] = SignalLimit(-1.0, 350.0, MAX_PRESSURE_RATE_BAR_S, 3.0, 15.0)
+                                                 rise=wheel_accel_bound(vehicle, i, up=True), active=1.0)
+        limits[f"brake_pressure_{w}"] = SignalLimit(-1.0, 350.0, MAX_PRESSURE_RATE_BAR_S, 3.0, 15.0, active=5.0)
         # (a motor's torque steps within a few ms: only the range and wild jumps)
         limits[f"drive_torque_{w}"] = SignalLimit(-5000.0, 5000.0, 200_000.0, 200.0)
     return limits
+
+
+def _is_marker(values: Mapping[str, float], previous: Mapping[str, float], limits: Mapping[str, SignalLimit]) -> bool:
+    """A frame of zeros (all bits 0, or all 1 in a signed signal: one step below zero) right after
+    one that showed a moving, braking or decelerating car: the sender's "no value" marker. No live
+    sensor reads exactly zero on every channel at once (four wheel speeds, four pressures, or
+    the accelerometer's three axes), and no car stops or releases its brakes within one frame."""
+    checked = [(name, x) for name, x in values.items() if name in limits]
+    if not checked or any(abs(x) > 0.002 for _, x in checked):
+        return False
+    return any(abs(previous.get(name, 0.0)) > limits[name].active for name, _ in checked)
 
 
 class _Track:
@@ -258,6 +270,8 @@ class InputGate:
         limits = self.limits
         previous = track.values
         dt = time_s - track.time_s
+        if _is_marker(values, previous, limits):
+            return "marker"
         for name, x in values.items():
             lim = limits.get(name)
             if lim is None:

@@ -218,3 +218,18 @@ def test_campaign_slow_dump_abs_runs_deep_into_slip_without_a_glitch(seed, famil
     assert not bad
     assert pipeline.stats.faults["wheel speed glitch"] == 0 and pipeline.front_end.gate.counts["wheel speed glitch"] == 0
     assert pipeline.estimator._fits > 50
+
+
+def test_a_frame_of_zeros_after_a_live_one_is_a_marker():
+    gate = InputGate(VEH, {"PRESS": 0.01, "ACCEL": 0.01})
+    live = dict(zip(PRESSURE_NAMES, (40.0, 41.0, 20.0, 21.0)))
+    zeros = dict.fromkeys(PRESSURE_NAMES, 0.0)
+    assert gate.admit(0.00, "PRESS", live) is None
+    assert gate.admit(0.01, "PRESS", zeros) == "marker"     # (40 bar in 10 ms would pass the rate limit)
+    assert gate.admit(0.02, "PRESS", dict(zip(PRESSURE_NAMES, (38.0, 39.0, 19.0, 20.0)))) is None
+    released = dict.fromkeys(PRESSURE_NAMES, 0.4)
+    quiet = InputGate(VEH, {"PRESS": 0.01})
+    assert quiet.admit(0.00, "PRESS", released) is None and quiet.admit(0.01, "PRESS", zeros) is None
+    # an accelerometer's all-ones frame (−1 LSB on each axis) while braking
+    assert gate.admit(0.005, "ACCEL", {"accel_long": -6.0, "accel_lat": 0.3, "yaw_rate": 0.01}) is None
+    assert gate.admit(0.015, "ACCEL", {"accel_long": -0.001, "accel_lat": -0.001, "yaw_rate": -0.0001}) == "marker"

@@ -16,6 +16,25 @@
 
 #define NW 4
 
+/* frontend._glitch_value: whether sample k of one wheel's speeds y (n of them) disagrees, the
+ * same way and by more than `threshold`, with its neighbours' interpolation and with each side's
+ * own trend (a sensor glitch; a wheel turning around deep in slip follows each side's trend). */
+static int glitch_at(const double *t, const double *y, Py_ssize_t n, Py_ssize_t k, double threshold)
+{
+    if (k < 2 || k + 2 >= n)
+        return 0;
+    const double t0 = t[k - 2], t1 = t[k - 1], t2 = t[k], t3 = t[k + 1], t4 = t[k + 2];
+    if (!(t0 < t1 && t1 < t2 && t2 < t3 && t3 < t4))
+        return 0;
+    const double y0 = y[k - 2], y1 = y[k - 1], y2 = y[k], y3 = y[k + 1], y4 = y[k + 2];
+    const double between = y1 + (y3 - y1) * (t2 - t1) / (t3 - t1);
+    const double left = y1 + (y1 - y0) * (t2 - t1) / (t1 - t0);
+    const double right = y3 - (y4 - y3) * (t3 - t2) / (t4 - t3);
+    const double da = y2 - between, db = y2 - left, dc = y2 - right;
+    return (da > threshold && db > threshold && dc > threshold)
+           || (da < -threshold && db < -threshold && dc < -threshold);
+}
+
 /* fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights)
  * or None when the timestamps are too degenerate for the closed form (the caller then uses
  * least squares). `speeds`: one 4-sequence per time. */
@@ -84,17 +103,15 @@ static PyObject *py_fit_wheels(PyObject *self, PyObject *args)
         goto out;
     }
     const double inv = 1.0 / det;
-    int glitch = 0.0 > threshold;
+    int glitch = 0;
     double omega[NW], omega_dot[NW];
+    (void)c22;
     for (int w = 0; w < NW; w++) {
         const double *yw = y + w * (n + 1);
         const double b0 = sum_of(yw, n), b1 = dot_of(u, yw, n), b2 = dot_of(u2, yw, n);
         const double k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
         const double k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv;
-        const double k2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv;
-        for (Py_ssize_t k = 0; k < n && !glitch; k++)
-            if (fabs(yw[k] - (k0 + k1 * u[k] + k2 * u2[k])) > threshold)
-                glitch = 1;
+        glitch = glitch || glitch_at(times, yw, n, n - 3, threshold);
         omega[w] = k0;
         omega_dot[w] = k1 / h;
     }
@@ -688,6 +705,20 @@ static int ref_plausible(FEState *s, const double *k, double ref, double fastest
 }
 
 /* FrontEnd._update_speed; `ref_fresh` is `_ref_fresh(time_s)` (the reference is None when absent). */
+/* frontend._second_fastest: the second-largest of the four wheels' speeds */
+static double second_of(const double *wl)
+{
+    double first = -INFINITY, second = -INFINITY;
+    for (int i = 0; i < NW; i++) {
+        if (wl[i] > first) {
+            second = first;
+            first = wl[i];
+        } else if (wl[i] > second)
+            second = wl[i];
+    }
+    return second;
+}
+
 static double update_speed(FEState *s, const double *k, double time_s, const double *wl, double accel_long,
                            int wheels_loaded, int has_ref, double ref, int ref_fresh, int *from_ref)
 {
@@ -712,8 +743,8 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
         v = v + accel_long * dt;
         if (!wheels_loaded) {
             v += k[K_GAIN_FREE] * (mean - v);
-        } else if (fastest > v) {
-            v += py_min(k[K_GAIN_UP] * (fastest - v), MAX_ABS_ACCEL * 0.5 * dt + 0.02);
+        } else if (second_of(wl) > v) {
+            v += py_min(k[K_GAIN_UP] * (second_of(wl) - v), MAX_ABS_ACCEL * 0.5 * dt + 0.02);
         } else {
             const double ceiling = fastest / (1.0 - k[K_MIN_BRAKED_SLIP]);
             if (v > ceiling)

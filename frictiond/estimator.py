@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from . import trust_region
+from . import input_quality
 
 try:
     # The per-update fit compiled (setup.py builds it when a C compiler is there); without it,
@@ -486,6 +487,7 @@ class LugreTrustRegionEstimator:
         self._axle_balance = 0.0
         self._axle_scales_cache: tuple[float, tuple[float, float]] = (math.nan, (1.0, 1.0))
         self._last_sample_s = -math.inf
+        self._input_share = 0.0   # the newest sample's share of corrupted input (input_quality)
         self._load_share = [1.0 / N_WHEELS] * N_WHEELS
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
@@ -587,6 +589,7 @@ class LugreTrustRegionEstimator:
                 self._last_jump_s += step
             self._excited_since_s = math.inf
         self._last_sample_s = t
+        self._input_share = sample.input_suspect_share   # (corrupted input costs confidence: input_quality)
         window.drop_before(t - o.window_s, self.core)
         fresh = len(window) == 0
         added = 0
@@ -1193,6 +1196,7 @@ class LugreTrustRegionEstimator:
         excess = max(0.0, self._innovation_score - o.jump_threshold)
         innovation = math.exp(-excess * excess / 8.0)
         confidence = excitation * ramp * innovation * math.exp(-0.5 * spread2 / o.confidence_tolerance**2)
+        confidence *= input_quality.confidence_factor(self._input_share)
         return confidence if math.isfinite(confidence) else 0.0
 
     def _axle_scale(self, wheel: int) -> float:

@@ -35,6 +35,7 @@ except ImportError:  # pragma: no cover - depends on the install
     compiled_front = None
 
 from .abs_activity import ABS_FLAG_NAMES, MASTER_PRESSURE_NAME, AbsActivity
+from .plausibility import InputGate
 from .samples import PhysicalSample
 from .vehicle import GRAVITY_MPS2, VehicleParams
 
@@ -72,6 +73,10 @@ PRESSURE_SENSOR_LAG_S = 0.04
 MAX_PRESSURE_BAR = 350.0
 MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 MAX_SPEED_MPS = 120.0
+# Under ABS a wheel's acceleration changes by at most ~800 rad/s² within 10 ms (pressure moving a few
+# thousand bar/s on ~25 N·m/bar over ~1.2 kg·m², and the tyre force past its peak): a sample further
+# than this × dt² off its own trend is suspect until confirmed or repaired.
+SUSPECT_JERK_RADPS3 = 80_000.0
 BODY_WHEELS_TOLERANCE = 0.25   # the body's and the wheels' total force agree within this (pad friction ±20 %)
 
 
@@ -88,7 +93,9 @@ class FrontEndOptions:
     min_brake_pressure: float = 1.0       # bar above push-out for a wheel to count as braked
     stale_periods: float = 3.0            # an input older than this many periods is stale
     default_period: float = 0.01          # s, when the DBC gives no cycle time
-    spike_threshold: float = 2.0          # rad/s deviation from the local fit that marks a glitch
+    # rad/s a glitch sample is off its neighbours and both sides' trends, on top of what the wheel's
+    # acceleration can change within a sample (`SUSPECT_JERK_RADPS3`·period²; see `_glitch_value`)
+    spike_threshold: float = 2.0
     max_gap: float = 0.25                 # s between wheel-speed frames before the filter restarts
     reorder_window: float = 0.05          # s; an older wheel-speed frame within this is skipped, not a restart
     speed_gain_up: float = 0.3            # observer gain when wheels read faster than the estimate
@@ -230,6 +237,8 @@ class FrontEnd:
         for m in message_signals:
             self._history.setdefault(m, _MessageHistory(options.default_period))
         self._required_histories = tuple((m, self._history[m]) for m in sorted(self.required_messages))
+        # What each required message is called in a fault (its first canonical signal's kind).
+        self._fault_names = {m: _input_label(message_signals[m]) for m in self.required_messages}
         # One wheel-speed sample per trigger: the per-sample constants (the derivative window,
         # the forgetting of the brake-gain and accelerometer-offset learning) are set for the
         # trigger's cycle time, not for 10 ms. A 7-sample window at 20 ms spans 0.12 s, over
@@ -239,6 +248,10 @@ class FrontEnd:
         self.declared_period_s = (self._history[trigger_message].period_s if trigger_message in self._history
                                   else options.default_period)
         self.sample_period_s = max(MIN_SAMPLE_PERIOD_S, self.declared_period_s)
+        # A glitch is off its neighbours by more than noise and more than a wheel's acceleration
+        # can change within a sample: at 20 ms (50 Hz wheel speeds) a wheel recovering from deep
+        # slip and overshooting is sampled as a zig-zag of ~10 rad/s on both front wheels alike.
+        self.glitch_threshold = options.spike_threshold + SUSPECT_JERK_RADPS3 * self.sample_period_s ** 2
         self.derivative_window = options.derivative_window or max(
             5, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
         # Each canonical signal's history, looked up once here rather than by message per value.
@@ -285,6 +298,8 @@ class FrontEnd:
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
         n = self.derivative_window
+        # Frame-level plausibility (issue 22): a corrupted frame never reaches the histories.
+        self.gate = InputGate(self.vehicle, {m: h.period_s for m, h in self._history.items()})
         self._abs_activity.reset()
         self._wheel_times: deque[float] = deque(maxlen=n)
         self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
@@ -353,13 +368,30 @@ class FrontEnd:
         history = self._history.get(message)
         if history is None:
             return None
-        if message == self.trigger_message:
+        is_trigger = message == self.trigger_message
+        if is_trigger:
             dt = time_s - self._last_trigger_s
             if -self.options.reorder_window < dt < 1e-4:
                 # A repeated or slightly out-of-order wheel-speed frame (gateways and log
                 # splices do this): skip it rather than restart the derivative filter.
                 self.skipped_triggers += 1
+                self.gate.note(time_s, "duplicate" if dt == 0.0 else "out of order")
                 return None
+        rejected = self.gate.admit(time_s, message, values)
+        if rejected is not None:
+            # Rejected: no sample from a wheel-speed frame that cannot be true (the last estimate
+            # is repeated), a fault when they keep coming; nothing at all for a frame whose time
+            # is not the bus's (an output must not carry it).
+            if not is_trigger or rejected in _NO_OUTPUT:
+                return None
+            return FrontEndResult(None, (), self._persistent_fault())
+        if message in self.gate.reanchored:
+            # Followed to a new level the physics could not reach (a sensor back from a dead
+            # spell): the derivative window must not straddle the step.
+            self.gate.reanchored.discard(message)
+            if is_trigger:
+                self._wheel_times.clear()
+                self._wheel_speeds.clear()
         core = self.core
         if core is not None and type(time_s) is float and type(values) is dict and time_s >= history.last_arrival_s:
             # `_MessageHistory.push`'s compiled path, without its call (once per input frame)
@@ -367,9 +399,18 @@ class FrontEnd:
             history.last_arrival_s = time_s
         else:
             history.push(time_s, values, core)
-        if message != self.trigger_message:
+        if not is_trigger:
+            self.gate.repair_spike(message, history.series)
             return None
         return self._on_trigger(time_s, history)
+
+    def _persistent_fault(self) -> str | None:
+        """A fault naming the required message whose frames keep being rejected, if any."""
+        for message, kind in self.gate.faulty_messages():
+            label = self._fault_names.get(message)
+            if label is not None:
+                return f"{label} {_REJECTION_FAULTS.get(kind, 'implausible')}"
+        return None
 
     def _on_trigger(self, time_s: float, history: _MessageHistory) -> FrontEndResult:
         opts = self.options
@@ -410,12 +451,37 @@ class FrontEnd:
         self._wheel_speeds.append(speeds)  # type: ignore[arg-type]
         if len(self._wheel_times) < self.derivative_window:
             return FrontEndResult(None, stale, None)
+        fault = self._persistent_fault()
+        if fault is not None:
+            return FrontEndResult(None, (), fault)
         if stale:
             return FrontEndResult(None, stale, None)
-        result = self._compute_sample(stale)
+        if self._newest_suspect() or self.gate.contested(time_s):
+            result = self._suspect_sample(stale)
+        else:
+            result = self._compute_sample(stale)
+        if result.fault == "wheel speed glitch":
+            self.gate.count_repair(result.fault)
         if result.sample is not None:
             self._mark_abs_activity(result.sample)
             self._mark_body_mu(result.sample)
+            result.sample.input_suspect_share = self.gate.suspect_share()
+        return result
+
+    def _suspect_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
+        """`_compute_sample` for a suspect sample: a wheel's newest samples are off its own trend
+        by more than a wheel's acceleration can change (maybe a glitch not yet confirmed: that
+        takes two more samples; its weight in the derivative is largest now), or a second node
+        sends one of the inputs. Not fitted, and it teaches the front end nothing: the learnt
+        state is put back and the speed estimate coasts on the accelerometer."""
+        speed_before = (self._speed_estimate_mps, self._speed_time_s)
+        learnt = [getattr(self, name) for name in _LEARNT_STATE]
+        result = self._compute_sample(stale)
+        for name, value in zip(_LEARNT_STATE, learnt):
+            setattr(self, name, value)
+        if result.sample is not None:
+            result.sample.usable = (False, False, False, False)
+            self._coast_speed(speed_before, result.sample.time_s)
         return result
 
     def _mark_body_mu(self, sample: PhysicalSample) -> None:
@@ -456,14 +522,68 @@ class FrontEnd:
 
     # -- the physics ---------------------------------------------------------------------------
     def _fit_wheels(self) -> tuple[float, list[float], list[float], bool]:
-        """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch).
+        """`_fit_window`, and when it finds a glitch (`_glitch_value`), the sample repaired in the
+        window for good and the fit made again: (t_c, ω(t_c), dω/dt(t_c), glitch)."""
+        fitted = self._fit_window()
+        if not fitted[3]:
+            return fitted
+        k = len(self._wheel_times) - 3
+        times, speeds = self._wheel_times, self._wheel_speeds
+        threshold = self.glitch_threshold
+        columns = list(zip(*speeds))
+        repaired = []
+        for y in columns:
+            value = _glitch_value(times, y, k, threshold)
+            repaired.append(y[k] if value is None else value)
+        speeds[k] = tuple(repaired)
+        t_c, omega, omega_dot, _ = self._fit_window()
+        return t_c, omega, omega_dot, True
+
+    def _coast_speed(self, before: tuple[float | None, float | None], time_s: float) -> None:
+        """The speed estimate carried over a suspect sample by the accelerometer alone: a
+        corrupted or spoofed wheel speed pulls it up (a wheel faster than the estimate), and under
+        ABS nothing pulls it down again for the rest of the stop (every slip would read high)."""
+        v, t = before
+        if v is None or t is None or self._speed_time_s is None or self._speed_estimate_mps is None:
+            return
+        accel = self._value("accel_long", time_s)
+        if accel is None or not math.isfinite(accel) or not 0.0 < time_s - t <= self.options.max_gap:
+            return
+        coasted = min(max(v + (accel - self._accel_bias_mps2) * (time_s - t), 0.0), MAX_SPEED_MPS)
+        # (only ever down to it: a reference sensor or a slower wheel may have said less)
+        self._speed_estimate_mps = min(self._speed_estimate_mps, coasted)
+
+    def _newest_suspect(self) -> bool:
+        """Whether a wheel's newest sample, or the one before it, leaves the trend of the samples
+        before it by more than `SUSPECT_JERK_RADPS3`·dt² (and, for the one before, its neighbours'
+        interpolation too): a glitch that `_glitch_value` can only confirm two samples later."""
+        times, speeds = self._wheel_times, self._wheel_speeds
+        n = len(times)
+        if n < 4:
+            return False
+        t0, t1, t2, t3 = times[n - 4], times[n - 3], times[n - 2], times[n - 1]
+        if not t0 < t1 < t2 < t3:
+            return False
+        limit = SUSPECT_JERK_RADPS3 * (t3 - t2) ** 2
+        for y0, y1, y2, y3 in zip(speeds[n - 4], speeds[n - 3], speeds[n - 2], speeds[n - 1]):
+            if abs(y3 - (y2 + (y2 - y1) * (t3 - t2) / (t2 - t1))) > limit:
+                return True
+            trend = y1 + (y1 - y0) * (t2 - t1) / (t1 - t0)
+            between = y1 + (y3 - y1) * (t2 - t1) / (t3 - t1)
+            if abs(y2 - trend) > limit and abs(y2 - between) > limit:
+                return True
+        return False
+
+    def _fit_window(self) -> tuple[float, list[float], list[float], bool]:
+        """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch), glitch
+        when one wheel's third-newest sample is a sensor error (`_glitch_value`).
 
         Least squares in closed form on plain floats (the normal equations of a 3-parameter fit
         in the time offset scaled to [−1, 1], so they stay well conditioned): a handful of points
         and four wheels are far too small for numpy's per-call overhead.
         """
         if self.core is not None:
-            fitted = self.core.fit_wheels(self._wheel_times, self._wheel_speeds, self.options.spike_threshold)
+            fitted = self.core.fit_wheels(self._wheel_times, self._wheel_speeds, self.glitch_threshold)
             if fitted is None:
                 self._torque_weights = None
                 return self._fit_wheels_numpy()
@@ -494,9 +614,8 @@ class FrontEnd:
             self._torque_weights = None
             return self._fit_wheels_numpy()
         inv = 1.0 / det
-        threshold = self.options.spike_threshold
-        # The largest residual only matters against the threshold; it starts at 0.0.
-        glitch = 0.0 > threshold
+        threshold = self.glitch_threshold
+        glitch = False
         omega = []
         omega_dot = []
         for y in zip(*self._wheel_speeds):   # each wheel's speeds over the window
@@ -505,12 +624,7 @@ class FrontEnd:
             b2 = sum(map(mul, u2, y))
             k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv
             k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv
-            k2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv
-            if not glitch:
-                for a, a2, yy in zip(u, u2, y):
-                    if abs(yy - (k0 + k1 * a + k2 * a2)) > threshold:
-                        glitch = True
-                        break
+            glitch = glitch or _glitch_value(times, y, n - 3, threshold) is not None
             omega.append(k0)
             omega_dot.append(k1 / h)
         self._torque_weights = _matched_weights(times, u, (c01 * inv / h, c11 * inv / h, c12 * inv / h))
@@ -528,8 +642,9 @@ class FrontEnd:
         design[:, 1] = tau
         design[:, 2] = tau * tau
         coef, *_ = np.linalg.lstsq(design, speeds, rcond=None)
-        residual = speeds - design @ coef
-        glitch = bool(np.max(np.abs(residual)) > self.options.spike_threshold)
+        k = len(times) - 3
+        glitch = any(_glitch_value(self._wheel_times, y, k, self.glitch_threshold) is not None
+                     for y in zip(*self._wheel_speeds))
         return t_c, [float(w) for w in coef[0]], [float(a) for a in coef[1]], glitch
 
     # The wheel's angular acceleration comes from the derivative filter, which averages ω̇ over
@@ -778,10 +893,12 @@ class FrontEnd:
             v = v + accel_long * dt
             if not wheels_loaded:
                 v += opts.speed_gain_free_rolling * (mean - v)
-            elif fastest > v:
-                # A wheel faster than the estimate pulls it up, but no faster than a car can
-                # gain speed: one corrupt wheel-speed frame must not carry it off.
-                v += min(opts.speed_gain_up * (fastest - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
+            elif _second_fastest(wheel_linear) > v:
+                # Two wheels faster than the estimate pull it up, but no faster than a car can
+                # gain speed: one corrupt wheel speed must not carry it off (under ABS nothing
+                # pulls it down again: each glitch of one wheel ratcheted it up, every slip high).
+                second = _second_fastest(wheel_linear)
+                v += min(opts.speed_gain_up * (second - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
             else:
                 # Braked wheels all read low during ABS: even the least-braked one slips by
                 # several percent, so pulling towards the fastest wheel biases the speed (and
@@ -911,11 +1028,65 @@ class FrontEnd:
             self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
 
 
+# Rejections of a trigger frame that give no output at all (its time is not the bus's).
+_NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
+# What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
+# must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
+_LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_sum_tt", "_recent_sum_far", "_brake_gain_factor",
+                 "_brake_model_holds", "_accel_bias_mps2", "_accel_bias_samples")
+# The fault a required input's persistently rejected frames give, by kind of rejection.
+_REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
+                     "clock step": "clock step"}
+
+
+def _input_label(signals: Iterable[str]) -> str:
+    """'wheel speed', 'brake pressure' or 'acceleration': what a required message carries."""
+    names = tuple(signals)
+    for prefix, label in (("wheel_speed", "wheel speed"), ("brake_pressure", "brake pressure"),
+                          ("accel", "acceleration")):
+        if any(n.startswith(prefix) for n in names):
+            return label
+    return names[0] if names else "input"
+
+
 # What `_frontcore.sample_physics` builds its results from: the two result types, then the
 # fault messages it can give (those of `_compute_sample`, in this order).
 _PHYSICS_TYPES = (PhysicalSample, FrontEndResult, "acceleration out of range", "brake pressure out of range",
                   "brake pressure implausible", "wheel speed glitch", "wheel speed stuck",
                   "brake pressure disagrees with deceleration")
+
+
+def _second_fastest(speeds: list[float]) -> float:
+    """The second-largest of the wheels' speeds (`_frontcore.c`'s `second_of`)."""
+    return sorted(speeds)[-2]
+
+
+def _glitch_value(times: Any, y: Any, k: int, threshold: float) -> float | None:
+    """What sample `k` of one wheel's speeds `y` should read if it is a sensor glitch, else None.
+
+    A glitch is one sample that disagrees, the same way and by more than `threshold`, with its
+    neighbours' interpolation and with each side's own trend (the line through the two samples
+    before it, and the two after it). A wheel cannot do that: it would need its acceleration to
+    jump and jump back within a sample. A wheel running deep into slip and recovering (an ABS
+    dumping late: 30-50 rad/s lost in 50 ms) turns around at the bottom, but each side of the
+    turn follows its own trend, so it is no glitch; a jump too fast for the torques on the wheel
+    never gets here (`plausibility.InputGate` rejects the frame).
+    (`_frontcore.c`'s `glitch_value` is the same, line by line.)
+    """
+    if k < 2 or k + 2 >= len(y):
+        return None
+    t0, t1, t2, t3, t4 = times[k - 2], times[k - 1], times[k], times[k + 1], times[k + 2]
+    if not t0 < t1 < t2 < t3 < t4:
+        return None
+    y0, y1, y2, y3, y4 = y[k - 2], y[k - 1], y[k], y[k + 1], y[k + 2]
+    between = y1 + (y3 - y1) * (t2 - t1) / (t3 - t1)
+    left = y1 + (y1 - y0) * (t2 - t1) / (t1 - t0)
+    right = y3 - (y4 - y3) * (t3 - t2) / (t4 - t3)
+    da, db, dc = y2 - between, y2 - left, y2 - right
+    if (da > threshold and db > threshold and dc > threshold) or (da < -threshold and db < -threshold
+                                                                   and dc < -threshold):
+        return between
+    return None
 
 
 def _interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:

@@ -8,7 +8,10 @@ from a bus or a log, through `busio`). The model:
 * keeps a rolling history of `MuMax`;
 * tracks, per input message of the config, when it was last seen (freshness) and its measured
   rate, and counts input frames the input codec cannot decode;
-* counts other, error and undecodable frames.
+* counts other, error and undecodable frames;
+* runs the front end's plausibility gate (`plausibility.InputGate`) over the decoded inputs: the
+  input frames it would reject, by kind, and their share of about the last second, which is why
+  an estimate leaves VALID when corruption is high (`input_quality.LEAVE_VALID_SHARE`).
 
 Times are in the frames' own time base (log time, or the bus's receive timestamps); callers that
 want ages pass `now` in that time base (see `FrameClock`).
@@ -169,17 +172,26 @@ class MonitorSnapshot:
     error_frames: int
     source: str = ""
     finished: bool = False
+    rejected: dict[str, int] | None = None   # input frames the plausibility gate refuses, by kind
+    suspect_share: float = 0.0               # ... share of the last second's input (rejected or repaired)
+    not_valid_reason: str = ""               # why the estimate cannot be VALID now ("" when it can)
 
 
 class MonitorModel:
     """Consumes frames; keeps what the monitor shows. `feed` returns the JSON object of an estimate."""
 
     def __init__(self, output_codec: Any, input_codec: Any = None, input_messages: Sequence[Any] | None = None,
-                 history: int = DEFAULT_HISTORY) -> None:
+                 history: int = DEFAULT_HISTORY, vehicle: Any = None) -> None:
         self.output_codec = output_codec
         self.input_codec = input_codec
         if input_messages is None and input_codec is not None:
             input_messages = input_codec.input_messages()
+        from .plausibility import InputGate
+        from .vehicle import VehicleParams
+
+        # The front end's own gate over what the monitor sees (the vehicle's limits when given).
+        self.input_gate = InputGate(vehicle or VehicleParams(),
+                                    {m.name: (m.period_s or 0.01) for m in (input_messages or ())})
         self.inputs: dict[int, RateTracker] = {}
         for m in sorted(input_messages or (), key=lambda m: m.frame_id):
             self.inputs[int(m.frame_id)] = RateTracker(m.name, int(m.frame_id), m.period_s)
@@ -233,10 +245,22 @@ class MonitorModel:
             from .codec import DecodeFailure
 
             try:
-                self.input_codec.decode(frame)
+                decoded = self.input_codec.decode(frame)
             except DecodeFailure as exc:
                 self.undecodable[f"{tracker.name}: {exc.reason}"] += 1
+                self.input_gate.note(frame.time_s, "undecodable")
+            else:
+                if decoded is not None:
+                    self.input_gate.admit(decoded.time_s, decoded.message, decoded.values)
         return None
+
+    def not_valid_reason(self) -> str:
+        """Why an estimate now cannot be VALID, as the pipeline decides it ("" when it can)."""
+        from .input_quality import LEAVE_VALID_SHARE, REASON
+
+        share = self.input_gate.suspect_share()
+        return f"{REASON}: {share:.0%} of the input rejected (above {LEAVE_VALID_SHARE:.0%})" \
+            if share > LEAVE_VALID_SHARE else ""
 
     def feed_all(self, frames: Iterable[Frame]) -> Iterator[dict[str, Any]]:
         """The JSON objects of all estimates among `frames` (the last one flushed at the end)."""
@@ -310,6 +334,9 @@ class MonitorModel:
             "Theta": _clean(est.theta),
             "e2e": est.e2e,
             "wheels": {w: (v.as_json() if v is not None else None) for w, v in zip(WHEELS, self.wheels)},
+            "input_rejected": dict(self.input_gate.counts),
+            "input_suspect_share": _clean(self.input_gate.suspect_share()),
+            "not_valid_reason": self.not_valid_reason(),
         }
 
     # ------------------------------------------------------------------------------------------
@@ -317,6 +344,7 @@ class MonitorModel:
         """The `r` key: E2E counters, frame counts, undecodable counts and rates start again."""
         self.output_codec.e2e.reset()
         self.undecodable.clear()
+        self.input_gate.counts.clear()
         self.frames_total = self.other_frames = self.error_frames = 0
         for tracker in (*self.inputs.values(), *self.outputs.values()):
             last = tracker.last_s
@@ -360,6 +388,9 @@ class MonitorModel:
             error_frames=self.error_frames,
             source=source,
             finished=finished,
+            rejected=dict(self.input_gate.counts),
+            suspect_share=self.input_gate.suspect_share(),
+            not_valid_reason=self.not_valid_reason(),
         )
 
 

@@ -226,6 +226,14 @@ def _body(snap: MonitorSnapshot, width: int, unicode: bool) -> list[Line]:
         (f"   other frames {snap.other_frames}   error frames {snap.error_frames}",
          "bad" if snap.error_frames else "normal"),
     ])
+    rejected = snap.rejected or {}
+    detail = "; ".join(f"{k} {v}" for k, v in sorted(rejected.items(), key=lambda kv: -kv[1])[:4])
+    lines.append([
+        (f"rejected input {sum(rejected.values())}", "warn" if rejected else "normal"),
+        (f" ({detail})" if detail else "", "normal"),
+        (f"   suspect {snap.suspect_share:.1%} of the last second", "normal"),
+        (f"   not VALID: {snap.not_valid_reason}" if snap.not_valid_reason else "", "bad"),
+    ])
     return lines
 
 

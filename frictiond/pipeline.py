@@ -10,6 +10,7 @@ from collections import Counter, deque
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from . import input_quality
 from .codec import DecodeFailure, InputCodec, OutputCodec, load_databases
 from .config import Config
 from .frames import Frame
@@ -52,6 +53,8 @@ class PipelineStats:
     frames_out: int = 0
     status_updates: Counter = field(default_factory=Counter)
     faults: Counter = field(default_factory=Counter)
+    # Updates whose estimate would have been VALID, by the reason it was not (input_quality).
+    not_valid: Counter = field(default_factory=Counter)
 
     @property
     def ignored_frames(self) -> int:
@@ -91,6 +94,7 @@ class Pipeline:
         self._wheel_divider = max(1, int(config.output.wheel_divider))
         self._recent_faults: deque[float] = deque()
         self._first_update_s: float | None = None
+        self._corrupt_input = False   # the share of corrupted input keeps the status from VALID
 
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame) -> list[Frame]:
@@ -105,6 +109,8 @@ class Pipeline:
             decoded = self.input_codec.decode(frame)
         except DecodeFailure as exc:
             stats.undecodable[str(exc.reason if hasattr(exc, "reason") else exc)] += 1
+            # (an input frame that could not be read is corruption too: it counts in the share)
+            self.front_end.gate.note(frame.time_s, "undecodable")
             return []
         if decoded is None:   # an extended frame that shares a standard input's ID
             self._ignore(frame)
@@ -168,7 +174,9 @@ class Pipeline:
         elif result.sample is None:
             # Filter warming up (start, or after a gap): repeat what we last said.
             prev = self.last_estimate
-            if prev is None or prev.status in (Status.INPUT_STALE, Status.FAULT):
+            # (not after a silence: a VALID from before it is no estimate of the road now)
+            silent = time_s - self._last_output_s > self.config.frontend.max_gap
+            if prev is None or prev.status in (Status.INPUT_STALE, Status.FAULT) or silent:
                 estimate = self._held_estimate(
                     time_s, Status.INIT if self._last_valid is None else Status.NOT_EXCITED
                 )
@@ -184,6 +192,7 @@ class Pipeline:
                 self._recent_faults.popleft()
             if result.dead_wheels:
                 self.stats.faults["wheel speed dead"] += 1
+            self._corrupt_input = input_quality.leaves_valid(result.sample.input_suspect_share, self._corrupt_input)
             if len(self._recent_faults) >= FAULTS_FOR_STATUS:
                 # Glitches the front end could repair, but so many that the input itself is
                 # suspect (a failing sensor, a spoofing node): say so instead of VALID.
@@ -193,6 +202,12 @@ class Pipeline:
                 # fit; what the others give is reported, but not promised (not VALID).
                 estimate = replace(estimate, status=Status.CONVERGING if estimate.status == Status.VALID
                                    else estimate.status, confidence=min(estimate.confidence, DEAD_WHEEL_CONFIDENCE))
+            elif self._corrupt_input and estimate.status == Status.VALID:
+                # Too much of the input was rejected as corrupt: what got through may bend the
+                # estimate (the summary and the monitor say so).
+                self.stats.not_valid[input_quality.REASON] += 1
+                estimate = replace(estimate, status=Status.CONVERGING,
+                                   confidence=min(estimate.confidence, input_quality.CAPPED_CONFIDENCE))
             elif estimate.status == Status.VALID:
                 self._last_valid = estimate
         self.last_estimate = estimate

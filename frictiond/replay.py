@@ -10,6 +10,7 @@ from typing import Any, Iterable, Protocol
 
 from .busio import LogFrames
 from .frames import Frame
+from .input_quality import LEAVE_VALID_SHARE
 from .pipeline import Pipeline, PipelineStats
 from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
 
@@ -43,6 +44,8 @@ class ReplaySummary:
     repeated_triggers: int = 0        # wheel-speed frames the front end skipped (repeats, reordering)
     measured_trigger_period_s: float | None = None   # as the wheel-speed frames arrived
     period_mismatch: bool = False     # ... far from the DBC's cycle time (`FrontEnd.period_mismatch`)
+    rejected: dict = field(default_factory=dict)   # input frames the plausibility gate refused, by kind
+    suspect_share: float = 0.0        # ... and its share of rejected/repaired input at the end
 
     def status_seconds(self) -> dict[str, float]:
         period = self.measured_trigger_period_s or self.trigger_period_s
@@ -71,8 +74,17 @@ class ReplaySummary:
             lines.append(f"cycle time        wheel speeds every {1e3 * measured:.1f} ms, the DBC says "
                          f"{1e3 * self.trigger_period_s:.1f} ms: fix its GenMsgCycleTime (the derivative filter, "
                          "staleness limits and sample counts are sized from it)")
+        if self.rejected:
+            lines.append(f"rejected input    {sum(self.rejected.values())}  (implausible frames, kept from the fit"
+                         + "".join(f"; {k}: {v}" for k, v in sorted(self.rejected.items(), key=lambda kv: (-kv[1], kv[0])))
+                         + ")")
         if s.faults:
             lines.append("faults            " + "; ".join(f"{k}: {v}" for k, v in s.faults.most_common(5)))
+        if s.not_valid:
+            lines.append("not VALID         " + "; ".join(
+                f"{k}: {v * (self.measured_trigger_period_s or self.trigger_period_s):.2f} s" for k, v in s.not_valid.most_common())
+                + f"  (VALID → CONVERGING while more than {LEAVE_VALID_SHARE:.0%} of the input frames of the last "
+                "second were rejected as corrupt)")
         f = self.final
         if f is not None:
             wheels = " ".join(f"{w} {m:.3f}" for w, m in zip(WHEELS, f.wheel_mu_max))
@@ -112,6 +124,7 @@ def replay_frames(
         pipeline.stats, first, last, pipeline.last_estimate, pipeline.front_end.period_of(pipeline.trigger_message),
         pipeline.input_codec.counter_jumps, pipeline.front_end.skipped_triggers,
         pipeline.front_end.measured_period_s, pipeline.front_end.period_mismatch(),
+        dict(pipeline.front_end.gate.counts), pipeline.front_end.gate.suspect_share(),
     )
 
 

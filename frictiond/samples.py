@@ -46,6 +46,9 @@ class PhysicalSample:
     speed_from_reference: bool = False
     abs_active: tuple[bool, bool, bool, bool] = (False, False, False, False)   # an ABS works the wheel
     body_mu: float = float("nan")  # the car's total tyre force / weight, from its accelerometer
+    # Share of input frames of about the last second rejected or repaired as implausible
+    # (`plausibility.InputGate.suspect_share`): corruption that may have got through.
+    input_suspect_share: float = 0.0
 
 
 @dataclass(slots=True)

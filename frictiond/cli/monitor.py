@@ -60,7 +60,7 @@ def _do_monitor(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"frictiond: config error: {exc}", file=sys.stderr)
         return EXIT_CONFIG
-    model = MonitorModel(output_codec, input_codec)
+    model = MonitorModel(output_codec, input_codec, vehicle=config.vehicle)
 
     if not args.json:
         if not (sys.stdout.isatty() and sys.stdin.isatty()):

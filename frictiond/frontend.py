@@ -1032,7 +1032,8 @@ class FrontEnd:
 _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
 # What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
-_LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_sum_tt", "_recent_sum_far", "_brake_gain_factor",
+_LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_count", "_recent_weight_nm", "_recent_needed_nm",
+                 "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
                  "_brake_model_holds", "_accel_bias_mps2", "_accel_bias_samples")
 # The fault a required input's persistently rejected frames give, by kind of rejection.
 _REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",

@@ -374,7 +374,7 @@ class StopDrive(Drive):
         return max(self.v0 - self.decel * t, 0.0)
 
     def accel(self, t):
-        return -self.decel if self.speed(t) > 0 else 0.0
+        return -self.decel if self.speed(t) > 0 else 0.03   # (a real accelerometer never reads 0.000)
 
 
 def feed_stop(fe: FrontEnd, drive: StopDrive, duration: float, pressure_scale: float = 1.0) -> list:

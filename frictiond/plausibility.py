@@ -107,10 +107,13 @@ def _is_marker(values: Mapping[str, float], previous: Mapping[str, float], limit
     one that showed a moving, braking or decelerating car: the sender's "no value" marker. No live
     sensor reads exactly zero on every channel at once (four wheel speeds, four pressures, or
     the accelerometer's three axes), and no car stops or releases its brakes within one frame."""
-    checked = [(name, x) for name, x in values.items() if name in limits]
-    if not checked or any(abs(x) > 0.002 for _, x in checked):
-        return False
-    return any(abs(previous.get(name, 0.0)) > limits[name].active for name, _ in checked)
+    checked = False
+    for name, x in values.items():    # (every frame passes here: out at its first live value)
+        if name in limits:
+            if abs(x) > 0.002:
+                return False
+            checked = True
+    return checked and any(abs(previous.get(name, 0.0)) > limits[name].active for name in values if name in limits)
 
 
 class _Track:
@@ -138,6 +141,9 @@ class InputGate:
 
     def __init__(self, vehicle: VehicleParams, periods: Mapping[str, float]) -> None:
         self.limits = signal_limits(vehicle)
+        # (the same as plain tuples, with the upward rate resolved: every input frame is checked)
+        self._bounds = {name: (lim.low, lim.high, lim.rate, lim.rate if lim.rise != lim.rise else lim.rise, lim.noise)
+                        for name, lim in self.limits.items()}
         self._tracks = {m: _Track(p) for m, p in periods.items()}
         self.counts: Counter[str] = Counter()
         self._bus_time_s = -math.inf
@@ -267,22 +273,20 @@ class InputGate:
         return None
 
     def _values(self, time_s: float, track: _Track, values: Mapping[str, float]) -> str | None:
-        limits = self.limits
+        bounds = self._bounds
         previous = track.values
         dt = time_s - track.time_s
-        if _is_marker(values, previous, limits):
+        if _is_marker(values, previous, self.limits):
             return "marker"
         for name, x in values.items():
-            lim = limits.get(name)
-            if lim is None:
+            b = bounds.get(name)
+            if b is None:
                 continue
-            if not lim.low <= x <= lim.high:      # (NaN: out)
+            low, high, rate, rise, noise = b
+            if not low <= x <= high:      # (NaN: out)
                 return "out of range"
             last = previous.get(name)
-            if last is None:
-                continue
-            rate = lim.rise if x > last and lim.rise == lim.rise else lim.rate   # (NaN: no own rise)
-            if abs(x - last) > rate * dt + lim.noise:
+            if last is not None and abs(x - last) > (rise if x > last else rate) * dt + noise:
                 return "rate"
         return None
 

@@ -144,6 +144,7 @@ class InputGate:
         # (the same as plain tuples, with the upward rate resolved: every input frame is checked)
         self._bounds = {name: (lim.low, lim.high, lim.rate, lim.rate if lim.rise != lim.rise else lim.rise, lim.noise)
                         for name, lim in self.limits.items()}
+        self._spike = {name: lim.spike for name, lim in self.limits.items() if lim.spike != math.inf}
         self._tracks = {m: _Track(p) for m, p in periods.items()}
         self.counts: Counter[str] = Counter()
         self._bus_time_s = -math.inf
@@ -276,19 +277,26 @@ class InputGate:
         bounds = self._bounds
         previous = track.values
         dt = time_s - track.time_s
-        if _is_marker(values, previous, self.limits):
-            return "marker"
+        live = False    # a value seen so far that is not zero: then the frame is no marker
+        kind = None
         for name, x in values.items():
             b = bounds.get(name)
             if b is None:
                 continue
+            if x > 0.002 or x < -0.002:
+                live = True
             low, high, rate, rise, noise = b
             if not low <= x <= high:      # (NaN: out)
-                return "out of range"
+                kind = "out of range"
+                break
             last = previous.get(name)
             if last is not None and abs(x - last) > (rise if x > last else rate) * dt + noise:
-                return "rate"
-        return None
+                kind = "rate"
+                break
+        # A marker is told first: (only) a frame without a live value can be one.
+        if not live and _is_marker(values, previous, self.limits):
+            return "marker"
+        return kind
 
     def _agrees(self, time_s: float, values: Mapping[str, float], earlier: tuple[float, dict] | None) -> bool:
         """Whether `values` are within the rate limits of an earlier rejected frame's."""
@@ -339,18 +347,18 @@ class InputGate:
     def repair_spike(self, message: str, series: MutableMapping[str, tuple]) -> None:
         """The frame before the newest of `message`: a value off both its neighbours (which agree)
         by more than the signal's `spike` tolerance is replaced by their interpolation."""
-        limits = self.limits
+        spikes = self._spike
         repaired = False
         for name, (times, values) in series.items():
-            lim = limits.get(name)
-            if lim is None or lim.spike == math.inf or len(values) < 3:
+            spike = spikes.get(name)
+            if spike is None or len(values) < 3:
                 continue
             a, b, c = values[-3], values[-2], values[-1]
             ta, tb, tc = times[-3], times[-2], times[-1]
             if not ta < tb < tc:
                 continue
             mid = a + (c - a) * (tb - ta) / (tc - ta)
-            if abs(b - mid) > lim.spike and abs(c - a) < 0.5 * lim.spike and (b - a) * (b - c) > 0.0:
+            if abs(b - mid) > spike and abs(c - a) < 0.5 * spike and (b - a) * (b - c) > 0.0:
                 values[-2] = mid
                 repaired = True
         if repaired:

@@ -119,14 +119,15 @@ def _is_marker(values: Mapping[str, float], previous: Mapping[str, float], limit
 class _Track:
     """One message's accepted history as the gate sees it."""
 
-    __slots__ = ("period_s", "time_s", "values", "arrival_s", "interval_s", "rejects", "last_reject", "recent",
-                 "arrivals", "rejected", "agreeing")
+    __slots__ = ("period_s", "time_s", "values", "arrival_s", "arrival_gap_s", "interval_s", "rejects", "last_reject",
+                 "recent", "arrivals", "rejected", "agreeing")
 
     def __init__(self, period_s: float) -> None:
         self.period_s = period_s
         self.time_s = -math.inf                 # of the last accepted frame
         self.values: dict[str, float] = {}      # ... its values
         self.arrival_s = -math.inf              # of the last frame, accepted or not
+        self.arrival_gap_s = period_s           # ... since the frame before it
         self.interval_s = period_s              # slow mean of the arrival intervals
         self.rejects = 0                        # consecutive rejected frames
         self.last_reject = ""
@@ -204,6 +205,7 @@ class InputGate:
             if track.arrival_s > -math.inf:
                 gap = min(time_s - track.arrival_s, 4.0 * track.period_s)
                 track.interval_s += (gap - track.interval_s) / 200.0
+                track.arrival_gap_s = time_s - track.arrival_s
             track.arrival_s = time_s
         if kind is None:
             self._accept(time_s, message, track, values)
@@ -269,7 +271,12 @@ class InputGate:
             return "duplicate"
         if dt <= 0.0 and track.time_s > -math.inf:
             return "out of order"
-        if dt < EARLY_SHARE_OF_PERIOD * min(track.period_s, max(track.interval_s, 0.5 * track.period_s)):
+        cycle = min(track.period_s, max(track.interval_s, 0.5 * track.period_s))
+        # Early, and with the frame before it less than a cycle and a half apart: an extra frame.
+        # (An early frame right after a late one is the bus's jitter, as a gateway's buffer or a
+        # busy sender delivers them: the two still span two cycles.)
+        if (dt < EARLY_SHARE_OF_PERIOD * cycle
+                and (time_s - track.arrival_s) + track.arrival_gap_s < (1.0 + EARLY_SHARE_OF_PERIOD) * cycle):
             return "second source"
         return None
 

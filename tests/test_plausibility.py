@@ -233,3 +233,13 @@ def test_a_frame_of_zeros_after_a_live_one_is_a_marker():
     # an accelerometer's all-ones frame (−1 LSB on each axis) while braking
     assert gate.admit(0.005, "ACCEL", {"accel_long": -6.0, "accel_lat": 0.3, "yaw_rate": 0.01}) is None
     assert gate.admit(0.015, "ACCEL", {"accel_long": -0.001, "accel_lat": -0.001, "yaw_rate": -0.0001}) == "marker"
+
+
+def test_an_early_frame_after_a_late_one_is_jitter_not_a_second_source():
+    # A gateway's buffer delivers a frame 4 ms late and the next on time, 6 ms later: the two
+    # still span two cycles. A second node between the real frames is told apart by the same rule.
+    gate = InputGate(VEH, {"PRESS": 0.01})
+    p = dict(zip(PRESSURE_NAMES, (50.0,) * 4))
+    assert [gate.admit(t, "PRESS", p) for t in (0.000, 0.010, 0.0245, 0.0295, 0.040)] == [None] * 5
+    spoofed = [gate.admit(t, "PRESS", p) for t in (0.045, 0.050, 0.055, 0.060)]
+    assert spoofed == ["second source", None, "second source", None]

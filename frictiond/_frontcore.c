@@ -794,8 +794,12 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
     const double gains = k[K_BRAKE_GAIN_FL] + k[K_BRAKE_GAIN_FR] + k[K_BRAKE_GAIN_RL] + k[K_BRAKE_GAIN_RR];
     const double accel_tolerance = BODY_ACCEL_TOLERANCE
                                    + (s->bias_samples < ACCEL_BIAS_LEARNT_SAMPLES ? UNLEARNT_ACCEL_TOLERANCE : 0.0);
-    const int resolved = gap > k[K_MASS] * k[K_RADIUS] * accel_tolerance + PRESSURE_TOLERANCE * gains;
-    const int released = k[K_MASTER_ONLY] != 0.0 && window_ratio < 1.0 - lim && resolved;
+    const double tolerance = k[K_MASS] * k[K_RADIUS] * accel_tolerance + PRESSURE_TOLERANCE * gains;
+    const int resolved = gap > tolerance;
+    const int released = (k[K_MASTER_ONLY] != 0.0
+                          && ((window_ratio < 1.0 - lim && resolved)
+                              || (ratio < 1.0 - lim && total_brake - needed > tolerance)))
+                         || s->released;
     s->released = released;
     s->model_holds = released || !resolved
                      || ((1.0 - lim) / BRAKE_MODEL_MARGIN <= window_ratio
@@ -917,6 +921,8 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         driving |= has_drive && fabs(drive[i]) > 20.0;
         any_stuck |= stuck[i];
     }
+    if (!braking)
+        s.released = 0;
     dead_wheels(&s, k, t_c, wl, braked, dead);
     for (int i = 0; i < NW; i++) {
         failed[i] = stuck[i] || dead[i];

@@ -752,6 +752,8 @@ class FrontEnd:
             slowest_ok = min(w for w, f in zip(wheel_linear, failed) if not f)
             wheel_linear = [slowest_ok if f else w for w, f in zip(wheel_linear, failed)]
         braking = any(braked)
+        if not braking:
+            self._brake_released = False    # (a new stop: the master pressure is the wheels' again)
         driving = self._has_drive_torque and any(abs(d) > 20.0 for d in drive)
 
         accel_long = accel_long_raw - self._accel_bias_mps2
@@ -1011,12 +1013,18 @@ class FrontEnd:
         gap = abs(gap) - abs(lag_explains) if gap * lag_explains > 0 else abs(gap)
         accel_tolerance = BODY_ACCEL_TOLERANCE_MPS2 + (
             UNLEARNT_ACCEL_TOLERANCE_MPS2 if self._accel_bias_samples < ACCEL_BIAS_LEARNT_SAMPLES else 0.0)
-        resolved = gap > veh.mass * veh.wheel_radius * accel_tolerance + PRESSURE_TOLERANCE_BAR * sum(self._brake_gains)
+        tolerance = veh.mass * veh.wheel_radius * accel_tolerance + PRESSURE_TOLERANCE_BAR * sum(self._brake_gains)
+        resolved = gap > tolerance
         # With one master pressure for all wheels, brakes giving less than it says beyond what the
         # gain correction explains are an ABS releasing wheels, not a wrong signal: no gain is
-        # learnt then, and no wheel's brake torque is known (`_brake_released`).
-        released = self.pressures_are_master and window_ratio < 1.0 - lim and resolved
-        self._brake_released = released
+        # learnt then, and no wheel's brake torque is known (`_brake_released`). Judged on this
+        # sample too, not only over the window: the first dump's samples, read with the master's
+        # torque, would put a peak far above the road's into the fit.
+        released = self.pressures_are_master and (
+            (window_ratio < 1.0 - lim and resolved) or (ratio < 1.0 - lim and total_brake - needed > tolerance))
+        # Once an ABS has released wheels in a stop it modulates them until the stop ends: from
+        # then on the master pressure bounds the wheels' pressures and says nothing more.
+        self._brake_released = released = released or self._brake_released
         self._brake_model_holds = (released or not resolved
                                    or (1.0 - lim) / _BRAKE_MODEL_MARGIN <= window_ratio <= (1.0 + lim) * _BRAKE_MODEL_MARGIN)
         if not released:

@@ -471,3 +471,25 @@ def test_pressures_lagging_an_abs_cycle_are_no_fault_but_a_factor_is(compiled):
     drive.swing = 0.0
     drive.pressure = 2.5 * _needed_pressure(1.0, 0.03, 19.0)
     assert any(r.fault == "brake pressure disagrees with deceleration" for r in feed(fe, drive, duration=1.5))
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_master_pressure_says_nothing_for_the_rest_of_a_stop_once_an_abs_released(compiled):
+    # An ABS that released wheels keeps modulating them until the stop ends, whatever the
+    # master pressure and the deceleration happen to agree on for a moment; the next stop, with
+    # the brakes let go in between, starts trusting the master pressure again.
+    drive = Drive(v0=25.0, decel=6.0, slip=0.08)
+    needed = _needed_pressure(6.0, 0.08, 22.0)
+    fe = make(pressures_are_master=True)
+    if not compiled:
+        fe.core = None
+    drive.pressure = 2.0 * needed
+    feed(fe, drive, duration=0.5)
+    drive.pressure = needed
+    later = [r for r in feed(fe, drive, duration=0.5) if r.sample is not None]
+    assert later and not any(any(r.sample.usable) for r in later)
+    drive.pressure = 0.0
+    feed(fe, drive, duration=0.2)
+    drive.pressure = needed
+    next_stop = [r for r in feed(fe, drive, duration=0.6) if r.sample is not None and r.sample.time_s > 0.3]
+    assert next_stop and all(all(r.sample.usable) for r in next_stop)

@@ -1012,6 +1012,91 @@ out:
     return result;
 }
 
+/* estimator._data_peaks's statistics: per wheel, its samples [lo, hi) in slip order (ties in time
+ * order, as numpy's stable sort), in groups of k; each group's mean less twice its standard error
+ * (sample standard deviation, ddof 1); the highest, times (1 - margin), not below 0; 0 for a wheel
+ * with fewer than max(k, min_n) samples. */
+typedef struct {
+    double slip;
+    Py_ssize_t at;
+} SlipAt;
+
+static int slip_at_order(const void *a, const void *b)
+{
+    const SlipAt *x = a, *y = b;
+    if (x->slip < y->slip)
+        return -1;
+    if (x->slip > y->slip)
+        return 1;
+    return (x->at > y->at) - (x->at < y->at);
+}
+
+static PyObject *py_data_peaks(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_slip, *o_mu, *o_wheel;
+    Py_ssize_t lo, hi, min_n;
+    int k;
+    double margin;
+    if (!PyArg_ParseTuple(args, "OOOnnind:data_peaks", &o_slip, &o_mu, &o_wheel, &lo, &hi, &k, &min_n, &margin))
+        return NULL;
+    Buf b[3];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    SlipAt *order = NULL;
+    if (get_array(o_slip, &b[0], "slip", -1, 0, 0) < 0)
+        goto out;
+    const Py_ssize_t cap = b[0].view.len / 8;
+    if (get_array(o_mu, &b[1], "mu", cap, 0, 0) < 0 || get_array(o_wheel, &b[2], "wheel", cap, 0, 1) < 0)
+        goto out;
+    if (lo < 0 || hi < lo || hi > cap || k < 2) {
+        PyErr_SetString(PyExc_ValueError, "data_peaks: lo, hi outside the window, or k < 2");
+        goto out;
+    }
+    const double *slip = b[0].view.buf, *mu = b[1].view.buf;
+    const Py_ssize_t *wheel = b[2].view.buf;
+    order = PyMem_Malloc(sizeof(SlipAt) * (size_t)(hi - lo + 1));
+    if (!order) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    double out[NW];
+    for (int w = 0; w < NW; w++) {
+        Py_ssize_t n = 0;
+        for (Py_ssize_t j = lo; j < hi; j++)
+            if (wheel[j] == w) {
+                order[n].slip = slip[j];
+                order[n].at = j;
+                n++;
+            }
+        out[w] = 0.0;
+        if (n < (k > min_n ? k : min_n))
+            continue;
+        qsort(order, (size_t)n, sizeof(SlipAt), slip_at_order);
+        double best = -INFINITY;
+        for (Py_ssize_t g = 0; g + k <= n; g += k) {
+            double sum = 0.0;
+            for (int i = 0; i < k; i++)
+                sum += mu[order[g + i].at];
+            const double mean = sum / k;
+            double ss = 0.0;
+            for (int i = 0; i < k; i++) {
+                const double d = mu[order[g + i].at] - mean;
+                ss += d * d;
+            }
+            const double lower = mean - 2.0 * sqrt(ss / (k - 1)) / sqrt((double)k);
+            if (lower > best)
+                best = lower;
+        }
+        out[w] = best * (1.0 - margin) > 0.0 ? best * (1.0 - margin) : 0.0;
+    }
+    result = Py_BuildValue("[dddd]", out[0], out[1], out[2], out[3]);
+out:
+    PyMem_Free(order);
+    release_all(b, 3);
+    return result;
+}
+
 /* ------------------------------------------------------------- the reported peak */
 
 
@@ -1571,6 +1656,9 @@ static PyMethodDef methods[] = {
     {"wheel_stats", py_wheel_stats, METH_VARARGS,
      "wheel_stats(slip, mu, wheel, times, lag, elasticity) -> 4 tuples of 12 floats\n\n"
      "estimator._wheel_stats_numpy: n, q10, q90, lam_lo, lam_hi, mu_hi, run-away rate, s2, s3, s4, y1, y2."},
+    {"data_peaks", py_data_peaks, METH_VARARGS,
+     "data_peaks(slip, mu, wheel, lo, hi, k, min_n, margin) -> [4 floats]\n\n"
+     "estimator._data_peaks's group statistics over the window's samples [lo, hi)."},
     {"recent_wheel_stats", py_recent_wheel_stats, METH_VARARGS,
      "recent_wheel_stats(slip, columns, lo, hi, threshold, lag, elasticity) -> wheel_stats of the window's\n"
      "samples whose forgetting weight (scratch row 2, from fit_window) exceeds threshold"},

@@ -208,6 +208,32 @@ def _wheel_stats_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, time
     return tuple(out)
 
 
+def _data_peaks_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, k: int, min_samples: int,
+                      margin: float) -> list[float]:
+    """`LugreTrustRegionEstimator._data_peaks`'s statistics on the samples given (time order);
+    `_fitcore.data_peaks` is the same, compiled."""
+    out = [0.0] * N_WHEELS
+    # All wheels at once (a handful of numpy calls, not a handful per wheel): the samples in
+    # (wheel, slip) order, each wheel's first n − n mod k of them in groups of k.
+    order = np.lexsort((slip, wheel))
+    counts = np.bincount(wheel.astype(np.intp), minlength=N_WHEELS)[:N_WHEELS]
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    used = np.where(counts >= max(k, min_samples), counts - counts % k, 0)
+    if not used.any():
+        return out
+    picks = np.concatenate([order[a:a + u] for a, u in zip(starts.tolist(), used.tolist()) if u])
+    groups = mu[picks].reshape(-1, k)
+    means = groups.mean(axis=1)
+    spread = np.sqrt(((groups - means[:, None]) ** 2).sum(axis=1) / (k - 1))
+    lower = means - 2.0 * spread / math.sqrt(k)
+    first = 0
+    for i, u in enumerate(used.tolist()):
+        if u:
+            out[i] = max(0.0, float(lower[first:first + u // k].max()) * (1.0 - margin))
+            first += u // k
+    return out
+
+
 def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: list[float], slip_floor: list[float],
                        peak_extrapolation: float, extrapolation_max_slip: float, thetas: list[float], v: float,
                        p: LugreParams, scales: tuple[float, float, float], cov_unit: np.ndarray,
@@ -1084,26 +1110,11 @@ class LugreTrustRegionEstimator:
             # end's body-equation check has corrected it: then it bounds nothing.)
             return out
         lo = int(w.time[w.start:w.end].searchsorted(self._last_sample_s - o.excitation_window_s)) + w.start
-        slip, mu, wheel = w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end]
-        # All wheels at once (a handful of numpy calls, not a handful per wheel): the samples in
-        # (wheel, slip) order, each wheel's first n − n mod k of them in groups of k.
-        order = np.lexsort((slip, wheel))
-        counts = np.bincount(wheel.astype(np.intp), minlength=N_WHEELS)[:N_WHEELS]
-        starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
-        used = np.where(counts >= max(k, self._min_wheel_samples), counts - counts % k, 0)
-        if not used.any():
-            return out
-        picks = np.concatenate([order[a:a + u] for a, u in zip(starts.tolist(), used.tolist()) if u])
-        groups = mu[picks].reshape(-1, k)
-        means = groups.mean(axis=1)
-        spread = np.sqrt(((groups - means[:, None]) ** 2).sum(axis=1) / (k - 1))
-        lower = means - 2.0 * spread / math.sqrt(k)
-        first = 0
-        for i, u in enumerate(used.tolist()):
-            if u:
-                out[i] = max(0.0, float(lower[first:first + u // k].max()) * (1.0 - o.measured_peak_margin))
-                first += u // k
-        return out
+        if self.core is not None:
+            return self.core.data_peaks(w.slip, w.mu, w.wheel, lo, w.end, k, self._min_wheel_samples,
+                                        o.measured_peak_margin)
+        return _data_peaks_numpy(w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end], k, self._min_wheel_samples,
+                                 o.measured_peak_margin)
 
     def _body_floor(self, now_s: float) -> float:
         """The least μ_max the car's own deceleration allows: the highest utilisation it showed

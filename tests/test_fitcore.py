@@ -546,3 +546,27 @@ def test_drift_reference_is_the_confidence_loop():
         core.drift_reference(deque([(0.0, 0.5)]), 1.0, 1.0)
     with pytest.raises(TypeError, match="pairs"):
         core.drift_reference([(0.0, 0.5, 1.0)], 0.0, 1.0)
+
+
+def test_data_peaks_compiled_equals_numpy():
+    # Random windows, slips rounded so that ties occur (numpy's stable order must be kept), some
+    # wheels with too few samples, margins and group sizes as configured and beyond.
+    from frictiond.estimator import _data_peaks_numpy
+
+    rng = np.random.default_rng(11)
+    for trial in range(300):
+        cap = 512
+        n = int(rng.integers(0, 300))
+        lo = int(rng.integers(0, cap - n))
+        slip = np.full(cap, np.nan)
+        mu = np.full(cap, np.nan)
+        wheel = np.full(cap, -1, dtype=np.intp)
+        slip[lo:lo + n] = np.round(rng.random(n) * 0.3, 2)
+        mu[lo:lo + n] = rng.random(n)
+        wheel[lo:lo + n] = rng.integers(0, 4 if trial % 3 else 2, n)
+        k = int(rng.integers(2, 9))
+        min_n = int(rng.integers(0, 40))
+        margin = float(rng.choice([0.0, 0.05, 0.2]))
+        got = core.data_peaks(slip, mu, wheel, lo, lo + n, k, min_n, margin)
+        want = _data_peaks_numpy(slip[lo:lo + n], mu[lo:lo + n], wheel[lo:lo + n], k, min_n, margin)
+        assert got == pytest.approx(want, abs=1e-12), (trial, got, want)

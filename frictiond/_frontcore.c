@@ -472,7 +472,7 @@ enum {
 
 /* The FrontEnd attributes sample_physics reads and writes. */
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
-    *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn, *A_recent_count,
+    *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released;
 
 typedef struct {
@@ -483,7 +483,7 @@ typedef struct {
     int has_last_sample, has_speed_time, has_speed_est;
     double last_sample, bias, unexplained, speed_time, speed_est;
     long bias_samples, ref_disagreements;
-    double gain_tt, gain_tn, recent_count, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
+    double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
     int model_holds, released;
 } FEState;
 
@@ -567,7 +567,6 @@ static int load_state(PyObject *fe, FEState *s)
         || get_float_attr(fe, A_speed_est, &s->speed_est, &s->has_speed_est) < 0
         || get_long_attr(fe, A_ref_disagreements, &s->ref_disagreements) < 0
         || get_float_attr(fe, A_gain_tt, &s->gain_tt, NULL) < 0 || get_float_attr(fe, A_gain_tn, &s->gain_tn, NULL) < 0
-        || get_float_attr(fe, A_recent_count, &s->recent_count, NULL) < 0
         || get_float_attr(fe, A_recent_weight, &s->recent_weight, NULL) < 0
         || get_float_attr(fe, A_recent_lag, &s->recent_lag, NULL) < 0
         || get_float_attr(fe, A_last_brake, &s->last_brake, NULL) < 0
@@ -629,7 +628,6 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_ref_disagreements, PyLong_FromLong(s->ref_disagreements)) < 0
         || set_attr_new(fe, A_gain_tt, PyFloat_FromDouble(s->gain_tt)) < 0
         || set_attr_new(fe, A_gain_tn, PyFloat_FromDouble(s->gain_tn)) < 0
-        || set_attr_new(fe, A_recent_count, PyFloat_FromDouble(s->recent_count)) < 0
         || set_attr_new(fe, A_recent_weight, PyFloat_FromDouble(s->recent_weight)) < 0
         || set_attr_new(fe, A_recent_lag, PyFloat_FromDouble(s->recent_lag)) < 0
         || set_attr_new(fe, A_last_brake, PyFloat_FromDouble(s->last_brake)) < 0
@@ -782,7 +780,6 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
     if (!isfinite(ratio))
         return;
     const double recent = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / BRAKE_MODEL_WINDOW);
-    s->recent_count = recent * s->recent_count + 1.0;
     s->recent_weight = recent * s->recent_weight + total_brake;
     s->recent_needed = recent * s->recent_needed + total_brake * needed;
     s->recent_brake = recent * s->recent_brake + total_brake * total_brake;
@@ -1088,7 +1085,7 @@ static int intern_attributes(void)
         {&A_bias_samples, "_accel_bias_samples"}, {&A_unexplained, "_unexplained_s"},
         {&A_speed_time, "_speed_time_s"}, {&A_speed_est, "_speed_estimate_mps"},
         {&A_ref_disagreements, "_ref_disagreements"}, {&A_gain_tt, "_gain_sum_tt"}, {&A_gain_tn, "_gain_sum_tn"},
-        {&A_recent_count, "_recent_count"}, {&A_recent_weight, "_recent_weight_nm"},
+        {&A_recent_weight, "_recent_weight_nm"},
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
         {&A_model_holds, "_brake_model_holds"},

@@ -309,8 +309,8 @@ class FrontEnd:
         self._accel_bias_samples = 0
         self._brake_gain_factor = 1.0
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
-        # Over ~0.2 s of braking: samples, Σ brake torque T, Σ T × torque the body needed, Σ T², ...
-        self._recent_count = self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
+        # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...
+        self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
         self._recent_lag_nm = 0.0          # ... Σ T × what the pressure sensors' lag may hide (signed)
         self._last_brake_nm = 0.0
         self._brake_released = False       # one master pressure overstating the brakes: an ABS at work
@@ -1000,7 +1000,6 @@ class FrontEnd:
         # Each sample weighs by its brake torque (the first instants of a stop, a few N·m against
         # the wheels' inertia and a lagging accelerometer, count little).
         recent = 1.0 - min(1.0, self.sample_period_s / _BRAKE_MODEL_WINDOW_S)
-        self._recent_count = recent * self._recent_count + 1.0
         self._recent_weight_nm = recent * self._recent_weight_nm + total_brake
         self._recent_needed_nm = recent * self._recent_needed_nm + total_brake * needed
         self._recent_brake_nm = recent * self._recent_brake_nm + total_brake * total_brake
@@ -1040,7 +1039,7 @@ class FrontEnd:
 _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
 # What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
-_LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_count", "_recent_weight_nm", "_recent_needed_nm",
+_LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
                  "_brake_model_holds", "_accel_bias_mps2", "_accel_bias_samples")
 # The fault a required input's persistently rejected frames give, by kind of rejection.

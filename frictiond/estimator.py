@@ -33,7 +33,7 @@ import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -103,6 +103,8 @@ class LugreTROptions:
     excitation_relative_slip_rate: float = 5.0   # ... or its slip growing at this many times itself per second
     excitation_runaway_elasticity: float = 0.3   # ... while μ grows by at most this share of the slip's relative growth
     excitation_runaway_decel: float = 1.5        # ... and the wheel decelerating faster than the car by this × μ·g
+    runaway_confirm_s: float = 0.5        # ... and within this long after, its slip running on (the wheel locking)
+    runaway_confirm_slip: float = 0.05    # ... by this much and to twice the slip it had reached
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
@@ -129,6 +131,7 @@ class LugreTROptions:
     body_floor_smoothing_s: float = 0.05  # ... averaged over this (the accelerometer's noise)
     body_floor_margin: float = 0.03       # ... less this (offset, pitch) ...
     body_floor_relative_margin: float = 0.03   # ... and this share of it
+    stop_floor_tolerance: float = 0.12    # VALID needs μ_max within this share of the stop's highest body utilisation
     axle_balance_time_constant: float = 2.0   # s; 0 disables the front/rear brake-gain balance
     axle_balance_limit: float = 0.3
 
@@ -403,6 +406,7 @@ class _SmoothedMaximum:
         self.smoothing_s = smoothing_s
         self._raw: deque[tuple[float, float]] = deque()
         self._sum = 0.0
+        self.highest = 0.0          # the highest mean since the last clear
         self._means: deque[tuple[float, float]] = deque()   # (time, mean), means decreasing
 
     def push(self, time_s: float, value: float) -> None:
@@ -416,6 +420,8 @@ class _SmoothedMaximum:
         if time_s - raw[0][0] < 0.5 * self.smoothing_s:
             return                  # not yet a mean over the span
         mean = self._sum / len(raw)
+        if mean > self.highest:
+            self.highest = mean
         means = self._means
         while means and means[-1][1] <= mean:
             means.pop()
@@ -431,6 +437,7 @@ class _SmoothedMaximum:
         self._raw.clear()
         self._means.clear()
         self._sum = 0.0
+        self.highest = 0.0
 
 
 class LugreTrustRegionEstimator:
@@ -527,6 +534,7 @@ class LugreTrustRegionEstimator:
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
         self._abs_seen_s = [-math.inf] * N_WHEELS
+        self._runaway: list[list] = [[-math.inf, 0.0, False] for _ in range(N_WHEELS)]
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
         self._event_start_s = -math.inf
@@ -552,8 +560,10 @@ class LugreTrustRegionEstimator:
         self._slip_support = None
         self._capped = None
         self._mu_history.clear()
+        self._body_mu.clear()
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
+        self._runaway = [[-math.inf, 0.0, False] for _ in range(N_WHEELS)]
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
@@ -628,6 +638,7 @@ class LugreTrustRegionEstimator:
         slips, mus, wheels = [], [], []
         min_slip, isfinite, usable = o.min_slip, math.isfinite, sample.usable
         wheel_slips, wheel_mus = sample.slip, sample.mu_used
+        self._follow_runaways(t, wheel_slips)
         abs_active = sample.abs_active
         body_mu = sample.body_mu
         if body_mu == body_mu:   # (not NaN: braking, with a fresh accelerometer)
@@ -1073,6 +1084,8 @@ class LugreTrustRegionEstimator:
         last = self._last_estimate
         kept = last is not None and last.status == Status.VALID and self._last_valid is not None
         threshold = o.keep_valid_confidence if kept else o.valid_confidence
+        if excitation > 0 and mu_max < self._stop_floor():
+            confidence = min(confidence, 0.5 * threshold)
         if excitation > 0 and confidence >= threshold:
             status = Status.VALID
             self._last_excited_s = now_s
@@ -1126,6 +1139,14 @@ class LugreTrustRegionEstimator:
         if best is None:
             return 0.0
         return best * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
+
+    def _stop_floor(self) -> float:
+        """The least μ_max the car's highest utilisation since this stop (or road) began allows,
+        with the tolerance of a fit that rounds a sharp peak: a fit below it has forgotten the
+        peak the car used (the wheels held deep in slip since), so its μ_max is not VALID."""
+        o = self.options
+        best = self._body_mu.highest
+        return (best * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin) * (1.0 - o.stop_floor_tolerance)
 
     def _restate(self, last: FrictionEstimate, now_s: float) -> FrictionEstimate:
         """The last (CONVERGING) fit again, at a cycle without usable samples.
@@ -1291,13 +1312,14 @@ class LugreTrustRegionEstimator:
         excitation by moving its peak onto the data (constant-slip braking would do that):
         (1) the data come near the fitted peak (slip ≥ `excitation_slip_ratio`·λ*, or utilised μ
             near μ_max), and
-        (2) the wheel is at its limit by a measure that does not come from the fit: an ABS works
-            the wheel (its controller released it at the peak: `abs_activity`), or the data
-            themselves bend over — a through-origin quadratic μ ≈ aλ + bλ² fitted to the
-            wheel's recent samples has, at the high-slip end, a tangent slope below half its
-            secant slope, which a linear region never does — and, until this stop has shown its
-            peak once, the wheel ran away into slip, its force no longer following (firm braking
-            below the peak bends the data too: tyre curves bend well before their peak).
+        (2) the wheel is at its limit by a measure that does not come from the fit: the data
+            themselves bend over — a through-origin quadratic μ ≈ aλ + bλ² fitted to the wheel's
+            recent samples has, at the high-slip end, a tangent slope below half its secant
+            slope, which a linear region never does — and, until this stop has shown its peak
+            once, an ABS works the wheel (its controller released it: `abs_activity`) or the
+            wheel ran away into slip, its force no longer following, and ran on towards lock-up
+            (firm braking below the peak bends the data too: tyre curves bend well before their
+            peak).
         Once shown, a wheel held past the fitted peak at its grip stays excited (ABS holding
         an ice plateau at nearly constant slip, where the bending has no spread to work on).
         """
@@ -1322,7 +1344,7 @@ class LugreTrustRegionEstimator:
                 continue
             abs_working = self._last_sample_s - self._abs_seen_s[i] <= o.excitation_window_s
             why[i], proximity, fresh = self._wheel_verdict(
-                wheel_stats[i], float(wheel_mu[i]), float(wheel_lam[i]), float(fit_at_hi[i]),
+                i, wheel_stats[i], float(wheel_mu[i]), float(wheel_lam[i]), float(fit_at_hi[i]),
                 bool(self._capped is not None and self._capped[i]), speed, peak_seen, abs_working)
             best = max(best, proximity)
             if fresh:
@@ -1333,7 +1355,7 @@ class LugreTrustRegionEstimator:
             self._peak_seen_speed = speed
         return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
 
-    def _wheel_verdict(self, stats: tuple[float, ...], mu_star: float, lam_star: float, fit_at_hi: float,
+    def _wheel_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float, fit_at_hi: float,
                        capped: bool, speed: float, peak_seen: bool, abs_working: bool) -> tuple[Any, float, bool]:
         """One wheel's evidence of its peak: (reason, proximity to the peak, fresh).
 
@@ -1360,7 +1382,7 @@ class LugreTrustRegionEstimator:
             # F_z·R²/J ≈ 25 g per unit of μ on cars, 1.5 μ·g is a brake torque 6 % past the peak.
             needed = max(min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi),
                          o.excitation_runaway_decel * GRAVITY_MPS2 * max(mu_hi, 0.0) / max(speed, 1.0))
-            if not runaway_rate >= needed:
+            if not self._runaway_confirmed(wheel, runaway_rate >= needed, lam_hi):
                 return "slip not running away", 0.0, True
         if lam_hi * speed < o.excitation_min_sliding_mps:
             # Slip is a speed difference over the speed: at walking pace a few quanta of the
@@ -1377,10 +1399,11 @@ class LugreTrustRegionEstimator:
                 # on an ice plateau): the peak is still being used, not left behind.
                 return ("past the peak ({:.2f})", lam_lo / lam_star), 1.0, False
             return "no slip spread", 0.0, True
-        if not abs_working:
-            bent = self._bending(lam_hi, s2, s3, s4, y1, y2)
-            if bent is not None:
-                return bent, 0.0, True
+        # (With an ABS too: a deceleration-triggered ABS releases a soft tyre at half its grip,
+        # by its own thresholds; only the data bending over show the tyre itself near its peak.)
+        bent = self._bending(lam_hi, s2, s3, s4, y1, y2)
+        if bent is not None:
+            return bent, 0.0, True
         if mu_hi > o.max_peak_secant * lam_hi:
             # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
             # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
@@ -1405,6 +1428,33 @@ class LugreTrustRegionEstimator:
         if lam_star >= 0.9 * MAX_MODEL_SLIP and fit_ratio < o.excitation_fit_ratio:  # (uncapped)
             return "no peak", 0.0, True   # no peak short of lock, and the data far below the fitted maximum
         return ("proximity {:.2f}", proximity), proximity, True
+
+    def _runaway_confirmed(self, wheel: int, running_away: bool, lam_hi: float) -> bool:
+        """Whether the wheel's runaway is a real one. Past its peak, with the brake torque above
+        what the road can take, a wheel's slip runs on towards lock-up until the torque falls
+        (`_follow_runaways`; a release by an ABS is evidence of its own: `abs_activity`). A
+        slip that grows fast for a moment and then stays is the linear region's transient (a
+        tyre with relaxation lags the slip as the pedal goes down: its force seems not to
+        follow), and one that falls back without an ABS is the driver's pedal."""
+        o = self.options
+        since, _reached, confirmed = self._runaway[wheel]
+        if self._last_sample_s - since <= o.runaway_confirm_s:
+            return confirmed
+        if running_away:
+            self._runaway[wheel] = [self._last_sample_s, lam_hi, False]
+        return False
+
+    def _follow_runaways(self, now_s: float, slips: Sequence[float]) -> None:
+        """Per sample, the slip of each wheel with an unconfirmed runaway: running on to twice
+        the slip it reached, and by `runaway_confirm_slip` at least, confirms it."""
+        o = self.options
+        for i in range(N_WHEELS):
+            state = self._runaway[i]
+            if state[2] or now_s - state[0] > o.runaway_confirm_s:
+                continue
+            reached = state[1]
+            if slips[i] >= max(2.0 * reached, reached + o.runaway_confirm_slip):   # (False for NaN)
+                state[2] = True
 
     @staticmethod
     def _bending(lam_hi: float, s2: float, s3: float, s4: float, y1: float, y2: float) -> Any:

@@ -13,8 +13,11 @@ from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
 from frictiond.samples import PhysicalSample, Status
 
 
-def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=None, speed_floor=4.0):
-    """ABS-like slip cycling around each wheel's own peak; curves[i](slip, v) -> μ, peaks[i](v) -> λ*."""
+def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=None, speed_floor=4.0,
+            abs_flags=True):
+    """ABS-like slip cycling around each wheel's own peak; curves[i](slip, v) -> μ, peaks[i](v) -> λ*.
+    `abs_flags`: the samples say an ABS works every wheel, as the front end does from the pressures
+    (slip cycling that never runs on to lock-up is an ABS's work, and its releases are the evidence)."""
     rng = np.random.default_rng(seed)
     t, v = 0.0, v0
     while v > speed_floor and (duration is None or t < duration):
@@ -24,7 +27,8 @@ def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=Non
             lam = lam_fn(v) * slip_scale * (1.0 + 0.55 * math.sin(2 * math.pi * 3.0 * t + i))
             slips.append(float(lam))
             mus.append(float(mu_fn(lam, v)) + float(rng.normal(0, noise)))
-        yield PhysicalSample(t, v, tuple(slips), tuple(mus), (4000.0,) * 4, (0.0,) * 4, (True,) * 4, True)
+        yield PhysicalSample(t, v, tuple(slips), tuple(mus), (4000.0,) * 4, (0.0,) * 4, (True,) * 4, True,
+                             abs_active=(abs_flags,) * 4)
         v -= max(0.5, float(np.mean(mus))) * 9.81 * 0.01
         t += 0.01
 
@@ -79,7 +83,7 @@ def test_low_slip_braking_never_claims_a_wrong_peak():
     p = tm.LugreParams(theta=1.3)
     curve = lugre_curve(p)
     est = LugreTrustRegionEstimator()
-    for s in braking(lambda t, i: curve, slip_scale=0.2, seed=2):
+    for s in braking(lambda t, i: curve, slip_scale=0.2, seed=2, abs_flags=False):
         e = est.update(s)
         if e.status == Status.VALID:
             assert s.speed_mps < 10.0
@@ -236,7 +240,7 @@ def test_a_cycle_without_usable_wheels_keeps_the_running_fit():
     p = tm.LugreParams(theta=6.0)
     curve = lugre_curve(p)
     est = LugreTrustRegionEstimator()
-    samples = list(braking(lambda t, i: curve, slip_scale=0.2, seed=5, duration=1.6))
+    samples = list(braking(lambda t, i: curve, slip_scale=0.2, seed=5, duration=1.6, abs_flags=False))
     for s in samples[:50]:
         fitted = est.update(s)
     assert fitted.status == Status.CONVERGING

@@ -40,7 +40,9 @@ def fitted_replay():
         lam_star = tm.peak(v, p)[1]
         slips = tuple(float(lam_star * (1.0 + 0.55 * math.sin(2 * math.pi * 3.0 * t + i))) for i in range(4))
         mus = tuple(float(tm.mu(s, v, p)) for s in slips)
-        sample = PhysicalSample(t, v, slips, mus, (4000.0,) * 4, (0.0,) * 4, (True,) * 4, True)
+        # (ABS cycling: the front end would flag the releases from the pressures)
+        sample = PhysicalSample(t, v, slips, mus, (4000.0,) * 4, (0.0,) * 4, (True,) * 4, True,
+                                abs_active=(True,) * 4)
         rec.record(est.update(sample), sample)
         v -= 0.08
         t += 0.01

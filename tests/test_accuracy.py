@@ -97,13 +97,13 @@ def test_moderate_braking_never_claims_valid(reports, label):
 def test_ice_magic_formula(reports):
     # Magic Formula ice: the peak at ~39 % slip, every wheel held at 26-60 %, all released
     # together; the speed observer must not take released wheels spinning back up for free
-    # rolling. The early fits (wheels locking within 0.1 s) are off by 7-10 %; a 5 % step of the
-    # estimate when the second ABS cycle adds samples nearer the peak dips the confidence just
-    # under the VALID threshold, which the status hysteresis rides through (0.45 s without it).
+    # rolling. The early fits (wheels locking within 0.1 s) are off by 7-10 %, and their spread
+    # (6-9 % of μ_max from 60 samples) now counts in full in the confidence: VALID once the
+    # second ABS cycle has added samples nearer the peak, 0.45 s after the onset.
     r = reports[("ice/mf", "lugre-tr")]
     assert r.mae_rel <= 0.06, f"relative MAE {r.mae_rel:.4f}"
     assert r.valid_share >= 0.95, f"VALID share {r.valid_share:.3f}"
-    assert r.convergence_s <= 0.3, f"convergence {r.convergence_s:.3f} s"
+    assert r.convergence_s <= 0.5, f"convergence {r.convergence_s:.3f} s"
     assert r.false_valid_count <= 0.03 * r.valid_count, f"false VALID {r.false_valid_count}/{r.valid_count}"
 
 

@@ -1165,6 +1165,8 @@ class LugreTrustRegionEstimator:
         if excitation <= 0.0 or now_s - self._last_fit_s > o.excitation_window_s:
             return dataclasses.replace(last, time_s=now_s)
         confidence = self._confidence(now_s, last.mu_max, last.mu_max_std, excitation)
+        if last.mu_max < self._stop_floor():
+            confidence = min(confidence, 0.5 * o.valid_confidence)   # (as `_report` does)
         if confidence < o.valid_confidence:
             return dataclasses.replace(last, time_s=now_s, confidence=confidence)
         estimate = dataclasses.replace(last, time_s=now_s, status=Status.VALID, confidence=confidence)

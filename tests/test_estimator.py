@@ -10,7 +10,7 @@ import pytest
 from frictiond import tyre_model as tm
 from frictiond.baseline_rls import BurckhardtRLSEstimator, burckhardt_peak
 from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
-from frictiond.samples import PhysicalSample, Status
+from frictiond.samples import FrictionEstimate, PhysicalSample, Status
 
 
 def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=None, speed_floor=4.0,
@@ -371,3 +371,24 @@ def test_a_full_window_drops_its_oldest_quarter_and_keeps_taking_samples():
 def test_the_window_has_room_for_window_s_of_four_wheels(window_s, period_s):
     est = LugreTrustRegionEstimator(dataclasses.replace(LugreTROptions(), window_s=window_s), sample_period_s=period_s)
     assert est._window.capacity >= 4 * window_s / period_s
+
+
+def test_a_restated_fit_below_the_grip_the_car_used_is_not_made_valid():
+    # A cycle without usable samples restates the last CONVERGING fit, and may promote it when
+    # its evidence is recent and only its settling held it back; not when the car has used more
+    # grip this stop than the fit claims (a bad last fit at walking pace, say).
+    def restated(highest):
+        est = LugreTrustRegionEstimator()
+        now = 5.0
+        last = FrictionEstimate(now - 0.01, Status.CONVERGING, 0.22, 0.1, 1.0, 0.4, (0.22,) * 4, 0.002)
+        est._excitation_cache = 1.0
+        est._last_fit_s = now - 0.01
+        est._excited_since_s = now - 1.0
+        for k in range(30):
+            est._mu_history.append((now - 0.3 + 0.01 * k, 0.22))
+        est._body_mu.highest = highest
+        return est._restate(last, now)
+
+    assert restated(0.0).status == Status.VALID
+    below = restated(0.45)
+    assert below.status == Status.CONVERGING and below.confidence < 0.5

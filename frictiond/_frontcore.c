@@ -469,6 +469,7 @@ enum {
 #define ACCEL_BIAS_LEARNT_SAMPLES 50
 #define PRESSURE_SENSOR_LAG 0.04
 #define MAX_PRESSURE_LAG 0.05
+#define MIN_PRESSURE_LAG 0.002
 #define PRESSURE_LAG_TIME_CONSTANT 5.0
 #define PRESSURE_LAG_PRIOR (10 * 10000.0 * 10000.0)
 /* FrontEnd._lag_state: the lag regression's five sums, the lag, the last sample's time and torques. */
@@ -804,8 +805,10 @@ static void learn_pressure_lag(FEState *s, const double *k, double brake, double
     const double det = s_bb * dd - s_bd * s_bd;
     if (det > 0.0) {
         const double gain = (s_bn * dd - s_bd * s_dn) / det, k_lag = (s_bb * s_dn - s_bd * s_bn) / det;
-        if (0.5 < gain && gain < 2.0)
-            s->lag[LAG_LAG] = py_min(py_max(k_lag / gain, 0.0), MAX_PRESSURE_LAG);
+        if (0.5 < gain && gain < 2.0) {
+            const double lag = py_min(py_max(k_lag / gain, 0.0), MAX_PRESSURE_LAG);
+            s->lag[LAG_LAG] = lag >= MIN_PRESSURE_LAG ? lag : 0.0;
+        }
     }
     s->lag[0] = s_bb, s->lag[1] = s_bd, s->lag[2] = s_dd, s->lag[3] = s_bn, s->lag[4] = s_dn;
 }

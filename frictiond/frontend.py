@@ -75,6 +75,10 @@ PRESSURE_SENSOR_LAG_S = 0.04
 # learnt over about this much braking, with a prior of "no lag" weighing like ten samples of a
 # pressure moving 10 kN·m/s. (Also in _frontcore.c.)
 MAX_PRESSURE_LAG_S = 0.05
+# ... and below this, not told from none: a lag-free sensor's fit wanders by up to ~1 ms (the
+# body equation's noise, the torques' rates being finite differences), and advancing the torques
+# by that only adds noise.
+MIN_PRESSURE_LAG_S = 0.002
 PRESSURE_LAG_TIME_CONSTANT_S = 5.0
 _PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
 MAX_PRESSURE_BAR = 350.0
@@ -1091,7 +1095,9 @@ class FrontEnd:
             k = (s_bn * dd - s_bd * s_dn) / det
             k_lag = (s_bb * s_dn - s_bd * s_bn) / det
             # (a gain k far from 1 is a body equation that does not hold: no lag from it)
-            lag = min(max(k_lag / k, 0.0), MAX_PRESSURE_LAG_S) if 0.5 < k < 2.0 else lag
+            if 0.5 < k < 2.0:
+                lag = min(max(k_lag / k, 0.0), MAX_PRESSURE_LAG_S)
+                lag = lag if lag >= MIN_PRESSURE_LAG_S else 0.0
         self._lag_state = (s_bb, s_bd, s_dd, s_bn, s_dn, lag) + self._lag_state[6:]
 
 

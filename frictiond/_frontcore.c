@@ -786,7 +786,8 @@ static void brake_torque_rates(FEState *s, const double *k, double time_s, const
     const double dt = time_s - s->lag[LAG_TIME];   /* (NaN before the first sample: no rate) */
     const int ok = 0.0 < dt && dt <= k[K_MAX_GAP];
     for (int i = 0; i < NW; i++) {
-        rates[i] = ok ? (torques[i] - s->lag[LAG_TORQUES + i]) / dt : 0.0;
+        const double rate = ok ? (torques[i] - s->lag[LAG_TORQUES + i]) / dt : 0.0;
+        rates[i] = isfinite(rate) ? rate : 0.0;
         s->lag[LAG_TORQUES + i] = torques[i];
     }
     s->lag[LAG_TIME] = time_s;
@@ -819,7 +820,7 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
 {
     const double decel = -accel_long;
     const double raw_brake = sum_of(brake, NW), raw_rate = sum_of(rates, NW);
-    const double total_brake = py_max(0.0, raw_brake + s->lag[LAG_LAG] * raw_rate);
+    const double total_brake = py_max(raw_brake + s->lag[LAG_LAG] * raw_rate, 0.0);
     const double brake_rate = (total_brake - s->last_brake) / k[K_SAMPLE_PERIOD];
     s->last_brake = total_brake;
     if (decel < k[K_GAIN_MIN_DECEL] || total_brake < 1.0 || !isfinite(brake_rate))
@@ -1085,7 +1086,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     const double gain = s.gain_factor;
     /* A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ. */
     for (int i = 0; i < NW; i++)
-        torques[i] = py_max(0.0, torques[i] + s.lag[LAG_LAG] * rates[i]);
+        torques[i] = py_max(torques[i] + s.lag[LAG_LAG] * rates[i], 0.0);   /* (NaN stays NaN) */
 
     double slips[NW], forces[NW], mus[NW];
     PyObject *usable = PyTuple_New(NW), *sample = NULL, *dead_list = NULL, *result = NULL;

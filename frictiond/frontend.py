@@ -817,7 +817,7 @@ class FrontEnd:
         gain = self._brake_gain_factor
         # A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ.
         lag = self._lag_state[5]
-        brake_torques = [max(0.0, b + lag * r) for b, r in zip(brake_torques, brake_rates)]
+        brake_torques = [max(b + lag * r, 0.0) for b, r in zip(brake_torques, brake_rates)]   # (NaN stays NaN)
 
         slips = []
         forces = []
@@ -993,7 +993,7 @@ class FrontEnd:
         veh = self.vehicle
         decel = -accel_long
         raw_brake, raw_rate = sum(brake_torques), sum(brake_rates)
-        total_brake = max(0.0, raw_brake + self._lag_state[5] * raw_rate)   # (advanced by the lag learnt)
+        total_brake = max(raw_brake + self._lag_state[5] * raw_rate, 0.0)   # (advanced by the lag learnt)
         brake_rate = (total_brake - self._last_brake_nm) / self.sample_period_s
         self._last_brake_nm = total_brake
         if decel < opts.brake_gain_min_decel or total_brake < 1.0 or not math.isfinite(brake_rate):
@@ -1066,13 +1066,15 @@ class FrontEnd:
             self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
 
     def _brake_torque_rates(self, time_s: float, torques: list[float]) -> list[float]:
-        """Each wheel's matched brake torque's rate since the last sample (0 after a gap)."""
+        """Each wheel's matched brake torque's rate since the last sample (0 after a gap, and
+        where either torque is not finite: one bad sample must not spoil the next one's torque)."""
         state = self._lag_state
         dt = time_s - state[6]            # (NaN before the first sample: no rate)
         self._lag_state = state[:6] + (time_s, *torques)
         if not 0.0 < dt <= self.options.max_gap:
             return [0.0, 0.0, 0.0, 0.0]
-        return [(b - b0) / dt for b, b0 in zip(torques, state[7:])]
+        rates = [(b - b0) / dt for b, b0 in zip(torques, state[7:])]
+        return [r if math.isfinite(r) else 0.0 for r in rates]
 
     def _learn_pressure_lag(self, brake: float, rate: float, needed: float) -> None:
         """The pressure sensors' lag τ from the body equation: the brakes' torque the body needs,

@@ -94,3 +94,14 @@ def test_a_non_finite_body_sample_teaches_the_lag_nothing():
     for _ in range(50):
         fe._learn_pressure_lag(100.0, 5000.0, 1000.0)
     assert 0.0 <= fe.pressure_lag_s <= 0.05
+
+
+def test_a_non_finite_brake_torque_spoils_no_other_sample():
+    # A NaN torque stays NaN in its own sample (its wheel's μ is not finite, so not usable), and the
+    # next sample's rate from it is taken as 0, not NaN: that sample's torques stay what they are.
+    # (`_frontcore.brake_torque_rates` does the same; the float path is the reference.)
+    fe, _ = run(LaggedAbsStop(lag_s=0.03), 1.0, compiled=False)
+    t = fe._lag_state[6]
+    assert fe._brake_torque_rates(t + 0.01, [math.nan, 500.0, 300.0, 300.0])[0] == 0.0
+    rates = fe._brake_torque_rates(t + 0.02, [400.0, 510.0, 300.0, 300.0])
+    assert rates[0] == 0.0 and rates[1] == pytest.approx(1000.0)

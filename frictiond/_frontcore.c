@@ -452,7 +452,7 @@ enum {
     K_MAX_ALL_WHEEL_SLIP, K_SAMPLE_PERIOD, K_BIAS_TAU, K_MASS, K_CG_HEIGHT, K_CG_FRONT, K_CG_REAR, K_TRACK_FRONT,
     K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
     K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_MASTER_ONLY, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
-    K_COUNT
+    K_LAG_COMPENSATION, K_COUNT
 };
 
 #define MAX_ABS_ACCEL 30.0
@@ -468,12 +468,22 @@ enum {
 #define UNLEARNT_ACCEL_TOLERANCE 0.3
 #define ACCEL_BIAS_LEARNT_SAMPLES 50
 #define PRESSURE_SENSOR_LAG 0.04
+#define MAX_PRESSURE_LAG 0.05
+#define MIN_PRESSURE_LAG 0.002
+#define PRESSURE_LAG_TIME_CONSTANT 5.0
+#define PRESSURE_LAG_PRIOR (10 * 10000.0 * 10000.0)
+/* FrontEnd._lag_state: the lag regression's five sums, the lag, the last sample's time and torques. */
+#define LAG_N 11
+#define LAG_LAG 5
+#define LAG_TIME 6
+#define LAG_TORQUES 7
 #define GRAVITY 9.80665
 
 /* The FrontEnd attributes sample_physics reads and writes. */
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
-    *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released;
+    *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released,
+    *A_lag_state;
 
 typedef struct {
     long repeats[NW];
@@ -485,6 +495,7 @@ typedef struct {
     long bias_samples, ref_disagreements;
     double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
     int model_holds, released;
+    double lag[LAG_N];
 } FEState;
 
 static int get_float_attr(PyObject *obj, PyObject *name, double *out, int *present)
@@ -576,6 +587,19 @@ static int load_state(PyObject *fe, FEState *s)
         || get_float_attr(fe, A_gain_factor, &s->gain_factor, NULL) < 0
         || get_bool_attr(fe, A_model_holds, &s->model_holds) < 0)
         goto out;
+    PyObject *lag = PyObject_GetAttr(fe, A_lag_state);
+    if (!lag)
+        goto out;
+    if (!PyTuple_Check(lag) || PyTuple_GET_SIZE(lag) != LAG_N) {
+        PyErr_SetString(PyExc_TypeError, "sample_physics: _lag_state must be a tuple of eleven");
+        Py_DECREF(lag);
+        goto out;
+    }
+    for (int i = 0; i < LAG_N; i++)
+        s->lag[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(lag, i));
+    Py_DECREF(lag);
+    if (PyErr_Occurred())
+        goto out;
     rc = 0;
 out:
     Py_XDECREF(repeats);
@@ -635,7 +659,8 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_recent_brake, PyFloat_FromDouble(s->recent_brake)) < 0
         || set_attr_new(fe, A_released, PyBool_FromLong(s->released)) < 0
         || set_attr_new(fe, A_gain_factor, PyFloat_FromDouble(s->gain_factor)) < 0
-        || set_attr_new(fe, A_model_holds, PyBool_FromLong(s->model_holds)) < 0)
+        || set_attr_new(fe, A_model_holds, PyBool_FromLong(s->model_holds)) < 0
+        || set_attr_new(fe, A_lag_state, tuple_of(s->lag, LAG_N)) < 0)
         goto out;
     rc = 0;
 out:
@@ -755,12 +780,47 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
     return v;
 }
 
+/* FrontEnd._brake_torque_rates: each wheel's matched brake torque's rate since the last sample. */
+static void brake_torque_rates(FEState *s, const double *k, double time_s, const double *torques, double *rates)
+{
+    const double dt = time_s - s->lag[LAG_TIME];   /* (NaN before the first sample: no rate) */
+    const int ok = 0.0 < dt && dt <= k[K_MAX_GAP];
+    for (int i = 0; i < NW; i++) {
+        const double rate = ok ? (torques[i] - s->lag[LAG_TORQUES + i]) / dt : 0.0;
+        rates[i] = isfinite(rate) ? rate : 0.0;
+        s->lag[LAG_TORQUES + i] = torques[i];
+    }
+    s->lag[LAG_TIME] = time_s;
+}
+
+/* FrontEnd._learn_pressure_lag: N = k·(B + τ·Ḃ) fitted by least squares with forgetting. */
+static void learn_pressure_lag(FEState *s, const double *k, double brake, double rate, double needed)
+{
+    const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / PRESSURE_LAG_TIME_CONSTANT);
+    const double s_bb = keep * s->lag[0] + brake * brake, s_bd = keep * s->lag[1] + brake * rate;
+    const double s_dd = keep * s->lag[2] + rate * rate, s_bn = keep * s->lag[3] + brake * needed;
+    const double s_dn = keep * s->lag[4] + rate * needed;
+    if (!(isfinite(s_bb) && isfinite(s_bd) && isfinite(s_dd) && isfinite(s_bn) && isfinite(s_dn)))
+        return;   /* a NaN here would stay in the sums for good */
+    const double dd = s_dd + PRESSURE_LAG_PRIOR;
+    const double det = s_bb * dd - s_bd * s_bd;
+    if (det > 0.0) {
+        const double gain = (s_bn * dd - s_bd * s_dn) / det, k_lag = (s_bb * s_dn - s_bd * s_bn) / det;
+        if (0.5 < gain && gain < 2.0) {
+            const double lag = py_min(py_max(k_lag / gain, 0.0), MAX_PRESSURE_LAG);
+            s->lag[LAG_LAG] = lag >= MIN_PRESSURE_LAG ? lag : 0.0;
+        }
+    }
+    s->lag[0] = s_bb, s->lag[1] = s_bd, s->lag[2] = s_dd, s->lag[3] = s_bn, s->lag[4] = s_dn;
+}
+
 /* FrontEnd._update_brake_gain */
 static void update_brake_gain(FEState *s, const double *k, double accel_long, double speed, const double *inertia,
-                              const double *brake, const double *drive, const double *wl)
+                              const double *brake, const double *drive, const double *wl, const double *rates)
 {
     const double decel = -accel_long;
-    const double total_brake = sum_of(brake, NW);
+    const double raw_brake = sum_of(brake, NW), raw_rate = sum_of(rates, NW);
+    const double total_brake = py_max(raw_brake + s->lag[LAG_LAG] * raw_rate, 0.0);
     const double brake_rate = (total_brake - s->last_brake) / k[K_SAMPLE_PERIOD];
     s->last_brake = total_brake;
     if (decel < k[K_GAIN_MIN_DECEL] || total_brake < 1.0 || !isfinite(brake_rate))
@@ -802,6 +862,8 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
                      || ((1.0 - lim) / BRAKE_MODEL_MARGIN <= window_ratio
                          && window_ratio <= (1.0 + lim) * BRAKE_MODEL_MARGIN);
     if (!released) {
+        if (k[K_LAG_COMPENSATION] != 0.0)
+            learn_pressure_lag(s, k, raw_brake, raw_rate, needed);
         ratio = py_min(py_max(ratio, 1.0 - lim), 1.0 + lim);
         const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_GAIN_TAU], 1e-3));
         const double weight = total_brake * total_brake;
@@ -1015,12 +1077,16 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
             accel_matched = m;
     }
     Py_XDECREF(matched);
-    double inertia[NW];
+    double rates[NW], inertia[NW];
+    brake_torque_rates(&s, k, t_c, torques, rates);
     for (int i = 0; i < NW; i++)
         inertia[i] = k[K_INERTIA] * omega_dot[i];
     if (k[K_GAIN_CORRECTION] != 0.0 && !glitch)
-        update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive, wl);
+        update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive, wl, rates);
     const double gain = s.gain_factor;
+    /* A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ. */
+    for (int i = 0; i < NW; i++)
+        torques[i] = py_max(torques[i] + s.lag[LAG_LAG] * rates[i], 0.0);   /* (NaN stays NaN) */
 
     double slips[NW], forces[NW], mus[NW];
     PyObject *usable = PyTuple_New(NW), *sample = NULL, *dead_list = NULL, *result = NULL;
@@ -1088,7 +1154,7 @@ static int intern_attributes(void)
         {&A_recent_weight, "_recent_weight_nm"},
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
-        {&A_model_holds, "_brake_model_holds"},
+        {&A_model_holds, "_brake_model_holds"}, {&A_lag_state, "_lag_state"},
     };
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (!(*names[i].slot = PyUnicode_InternFromString(names[i].name)))

@@ -70,6 +70,17 @@ ACCEL_BIAS_LEARNT_SAMPLES = 50
 # ... and while the brakes' torque moves, what a pressure sensor trailing it by this long misses
 # (a pedal applied at 1,500 bar/s, an ABS dump: tens of bar).
 PRESSURE_SENSOR_LAG_S = 0.04
+# The pressure sensors' own lag, identified from the body equation (`_learn_pressure_lag`), is
+# taken as at most this (a first-order lag of a few tens of ms; more would be a broken sensor),
+# learnt over about this much braking, with a prior of "no lag" weighing like ten samples of a
+# pressure moving 10 kN·m/s. (Also in _frontcore.c.)
+MAX_PRESSURE_LAG_S = 0.05
+# ... and below this, not told from none: a lag-free sensor's fit wanders by up to ~1 ms (the
+# body equation's noise, the torques' rates being finite differences), and advancing the torques
+# by that only adds noise.
+MIN_PRESSURE_LAG_S = 0.002
+PRESSURE_LAG_TIME_CONSTANT_S = 5.0
+_PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
 MAX_PRESSURE_BAR = 350.0
 MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 MAX_SPEED_MPS = 120.0
@@ -116,6 +127,9 @@ class FrontEndOptions:
     dead_wheel_ratio: float = 0.1           # a wheel this far below the others (share of their speed) ...
     dead_wheel_s: float = 0.2               # ... for longer than an ABS lets a braked wheel lock is dead
     dead_wheel_unbraked_s: float = 0.05     # ... or this long with no brake pressure that could lock it
+    # Identify the pressure sensors' lag from the body equation and advance the brake torques by
+    # it (`_learn_pressure_lag`); off: the pressures are taken as the brakes' at their instant.
+    pressure_lag_compensation: bool = True
 
 
     def validate(self) -> None:
@@ -292,7 +306,7 @@ class FrontEnd:
             vehicle.wheel_inertia, options.brake_gain_correction, options.brake_gain_min_decel,
             vehicle.rolling_resistance, vehicle.drag_area_coefficient, options.brake_gain_limits,
             options.brake_gain_time_constant, options.max_slip, self._has_drive_torque, self._has_yaw_rate,
-            float(self.pressures_are_master), *self._brake_gains))
+            float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation))
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -315,6 +329,10 @@ class FrontEnd:
         self._last_brake_nm = 0.0
         self._brake_released = False       # one master pressure overstating the brakes: an ABS at work
         self._brake_model_holds = True
+        # The pressure-lag regression (`_learn_pressure_lag`): Σ B², Σ B·Ḃ, Σ Ḃ², Σ B·N, Σ Ḃ·N, the
+        # lag it gives, then the time and the four matched brake torques of the last sample (their
+        # rates). One tuple, replaced whole, so that a suspect sample's state is put back as is.
+        self._lag_state: tuple[float, ...] = (0.0,) * 6 + (math.nan, 0.0, 0.0, 0.0, 0.0)
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
         self._ref_disagreements = 0
@@ -348,6 +366,11 @@ class FrontEnd:
     @property
     def accel_bias_mps2(self) -> float:
         return self._accel_bias_mps2
+
+    @property
+    def pressure_lag_s(self) -> float:
+        """The pressure sensors' lag behind the brakes, as learnt from the body equation."""
+        return self._lag_state[5]
 
     # -- staleness ---------------------------------------------------------------------------
     def stale_messages(self, now_s: float) -> tuple[str, ...]:
@@ -785,12 +808,16 @@ class FrontEnd:
 
         loads = veh.normal_forces(accel_long, accel_lat)
         brake_torques, accel_long_matched = self._matched_inputs(pressures, accel_long_raw)
+        brake_rates = self._brake_torque_rates(t_c, brake_torques)
         inertia_torques = [veh.wheel_inertia * float(a) for a in omega_dot]
         if opts.brake_gain_correction and not glitch:
             # The body's deceleration through the same filter as the torques it is compared with.
             self._update_brake_gain(accel_long_matched - self._accel_bias_mps2,
-                                    speed, inertia_torques, brake_torques, drive, wheel_linear)
+                                    speed, inertia_torques, brake_torques, drive, wheel_linear, brake_rates)
         gain = self._brake_gain_factor
+        # A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ.
+        lag = self._lag_state[5]
+        brake_torques = [max(b + lag * r, 0.0) for b, r in zip(brake_torques, brake_rates)]   # (NaN stays NaN)
 
         slips = []
         forces = []
@@ -959,12 +986,14 @@ class FrontEnd:
         brake_torques: list[float],
         drive: list[float],
         wheel_linear: list[float],
+        brake_rates: list[float],
     ) -> None:
         """Body equation M dv/dt = −ΣF_x − B v − D v² as an independent check on brake force."""
         opts = self.options
         veh = self.vehicle
         decel = -accel_long
-        total_brake = sum(brake_torques)
+        raw_brake, raw_rate = sum(brake_torques), sum(brake_rates)
+        total_brake = max(raw_brake + self._lag_state[5] * raw_rate, 0.0)   # (advanced by the lag learnt)
         brake_rate = (total_brake - self._last_brake_nm) / self.sample_period_s
         self._last_brake_nm = total_brake
         if decel < opts.brake_gain_min_decel or total_brake < 1.0 or not math.isfinite(brake_rate):
@@ -1027,12 +1056,51 @@ class FrontEnd:
         self._brake_model_holds = (released or not resolved
                                    or (1.0 - lim) / _BRAKE_MODEL_MARGIN <= window_ratio <= (1.0 + lim) * _BRAKE_MODEL_MARGIN)
         if not released:
+            if opts.pressure_lag_compensation:
+                self._learn_pressure_lag(raw_brake, raw_rate, needed)
             ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
             keep = 1.0 - min(1.0, self.sample_period_s / max(opts.brake_gain_time_constant, 1e-3))
             weight = total_brake * total_brake
             self._gain_sum_tt = keep * self._gain_sum_tt + weight
             self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
             self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
+
+    def _brake_torque_rates(self, time_s: float, torques: list[float]) -> list[float]:
+        """Each wheel's matched brake torque's rate since the last sample (0 after a gap, and
+        where either torque is not finite: one bad sample must not spoil the next one's torque)."""
+        state = self._lag_state
+        dt = time_s - state[6]            # (NaN before the first sample: no rate)
+        self._lag_state = state[:6] + (time_s, *torques)
+        if not 0.0 < dt <= self.options.max_gap:
+            return [0.0, 0.0, 0.0, 0.0]
+        rates = [(b - b0) / dt for b, b0 in zip(torques, state[7:])]
+        return [r if math.isfinite(r) else 0.0 for r in rates]
+
+    def _learn_pressure_lag(self, brake: float, rate: float, needed: float) -> None:
+        """The pressure sensors' lag τ from the body equation: the brakes' torque the body needs,
+        N = ΣR·F_x − ΣJ·ω̇, is k·(B + τ·Ḃ) at every instant, B the torque the pressures say; a
+        least-squares fit of N on B and Ḃ gives k and k·τ (each sample as it comes, with forgetting,
+        and a prior of no lag). The wheels' torque balance sees the same lag: under ABS it read μ
+        30 % high while the pressure fell and 25 % low while it rose (the peak read high)."""
+        s_bb, s_bd, s_dd, s_bn, s_dn, lag = self._lag_state[:6]
+        keep = 1.0 - min(1.0, self.sample_period_s / PRESSURE_LAG_TIME_CONSTANT_S)
+        s_bb = keep * s_bb + brake * brake
+        s_bd = keep * s_bd + brake * rate
+        s_dd = keep * s_dd + rate * rate
+        s_bn = keep * s_bn + brake * needed
+        s_dn = keep * s_dn + rate * needed
+        if not all(map(math.isfinite, (s_bb, s_bd, s_dd, s_bn, s_dn))):
+            return      # a NaN here would stay in the sums for good
+        dd = s_dd + _PRESSURE_LAG_PRIOR
+        det = s_bb * dd - s_bd * s_bd
+        if det > 0.0:
+            k = (s_bn * dd - s_bd * s_dn) / det
+            k_lag = (s_bb * s_dn - s_bd * s_bn) / det
+            # (a gain k far from 1 is a body equation that does not hold: no lag from it)
+            if 0.5 < k < 2.0:
+                lag = min(max(k_lag / k, 0.0), MAX_PRESSURE_LAG_S)
+                lag = lag if lag >= MIN_PRESSURE_LAG_S else 0.0
+        self._lag_state = (s_bb, s_bd, s_dd, s_bn, s_dn, lag) + self._lag_state[6:]
 
 
 # Rejections of a trigger frame that give no output at all (its time is not the bus's).
@@ -1041,7 +1109,7 @@ _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
 _LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
-                 "_brake_model_holds", "_accel_bias_mps2", "_accel_bias_samples")
+                 "_brake_model_holds", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state")
 # The fault a required input's persistently rejected frames give, by kind of rejection.
 _REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
                      "clock step": "clock step"}

@@ -169,7 +169,7 @@ def test_history_push_is_the_same_on_both_paths():
 PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_sample_time_s", "_accel_bias_mps2",
                  "_accel_bias_samples", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
                  "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",
-                 "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_model_holds")
+                 "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_model_holds", "_lag_state")
 
 
 def _physics_stream(seed: int, steps: int):
@@ -230,7 +230,7 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
 
     compiled, floats = make(), make()
     floats.core = None
-    faults, samples, from_ref, dead = set(), 0, 0, 0
+    faults, samples, from_ref, dead, lag = set(), 0, 0, 0, 0.0
     for t, message, values in _physics_stream(seed, 3000):
         a, b = compiled.push(t, message, values), floats.push(t, message, values)
         assert (a is None) == (b is None)
@@ -247,6 +247,7 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
             assert (a.sample.usable, a.sample.braking, a.sample.speed_from_reference) == \
                    (b.sample.usable, b.sample.braking, b.sample.speed_from_reference)
         faults.add(a.fault)
+        lag = max(lag, compiled.pressure_lag_s)
         for name in PHYSICS_STATE:
             x, y = getattr(compiled, name), getattr(floats, name)
             assert type(x) is type(y), name
@@ -256,6 +257,7 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
     assert {"acceleration out of range", "brake pressure out of range", "brake pressure implausible",
             "wheel speed stuck", "wheel speed glitch", None} <= faults, faults
     assert samples > 1000 and 0 < from_ref < samples and dead > 5
+    assert lag > 0.002    # (the pressure-lag compensation was at work, not only its zero)
 
 
 @needs_core

@@ -224,7 +224,8 @@ def test_brake_gain_is_learnt_within_a_stop_and_survives_a_non_finite_sample():
     feed(fe, drive, duration=0.5)
     assert fe.brake_gain_factor == pytest.approx(1 / 1.2, rel=0.04)
     learnt = fe.brake_gain_factor
-    fe._update_brake_gain(-drive.decel, 20.0, [0.0] * 4, [500.0, 500.0, 200.0, float("nan")], [0.0] * 4, [20.0] * 4)
+    fe._update_brake_gain(-drive.decel, 20.0, [0.0] * 4, [500.0, 500.0, 200.0, float("nan")], [0.0] * 4, [20.0] * 4,
+                          [0.0] * 4)
     assert fe.brake_gain_factor == learnt
 
 

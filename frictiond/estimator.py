@@ -53,6 +53,9 @@ from .vehicle import GRAVITY_MPS2, VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
 N_WHEELS = 4
+# A car tyre's longest relaxation length (0.1–0.6 m): its force lags a change of slip by up to
+# this over the speed.
+MAX_RELAXATION_M = 0.6
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,7 +107,7 @@ class LugreTROptions:
     excitation_runaway_elasticity: float = 0.3   # ... while μ grows by at most this share of the slip's relative growth
     excitation_runaway_decel: float = 1.5        # ... and the wheel decelerating faster than the car by this × μ·g
     runaway_confirm_s: float = 0.5        # ... and within this long after, its slip running on (the wheel locking)
-    runaway_confirm_slip: float = 0.05    # ... by this much and to twice the slip it had reached
+    runaway_confirm_slip: float = 0.05    # ... by this much and to twice the slip it had reached, or back with its force
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
@@ -535,7 +538,7 @@ class LugreTrustRegionEstimator:
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
         self._abs_seen_s = [-math.inf] * N_WHEELS
-        self._runaway: list[list] = [[-math.inf, 0.0, False] for _ in range(N_WHEELS)]
+        self._runaway: list[list] = [[-math.inf, 0.0, False, 0.0, math.nan, math.inf] for _ in range(N_WHEELS)]
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
         self._event_start_s = -math.inf
@@ -564,7 +567,7 @@ class LugreTrustRegionEstimator:
         self._body_mu.clear()
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
-        self._runaway = [[-math.inf, 0.0, False] for _ in range(N_WHEELS)]
+        self._runaway = [[-math.inf, 0.0, False, 0.0, math.nan, math.inf] for _ in range(N_WHEELS)]
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
@@ -639,7 +642,7 @@ class LugreTrustRegionEstimator:
         slips, mus, wheels = [], [], []
         min_slip, isfinite, usable = o.min_slip, math.isfinite, sample.usable
         wheel_slips, wheel_mus = sample.slip, sample.mu_used
-        self._follow_runaways(t, wheel_slips)
+        self._follow_runaways(t, v, wheel_slips, wheel_mus)
         abs_active = sample.abs_active
         body_mu = sample.body_mu
         if body_mu == body_mu:   # (not NaN: braking, with a fresh accelerometer)
@@ -1437,31 +1440,44 @@ class LugreTrustRegionEstimator:
         return ("proximity {:.2f}", proximity), proximity, True
 
     def _runaway_confirmed(self, wheel: int, running_away: bool, lam_hi: float) -> bool:
-        """Whether the wheel's runaway is a real one. Past its peak, with the brake torque above
-        what the road can take, a wheel's slip runs on towards lock-up until the torque falls
-        (`_follow_runaways`; a release by an ABS is evidence of its own: `abs_activity`). A
-        slip that grows fast for a moment and then stays is the linear region's transient (a
-        tyre with relaxation lags the slip as the pedal goes down: its force seems not to
-        follow), and one that falls back without an ABS is the driver's pedal."""
+        """Whether the wheel's runaway is a real one (`_follow_runaways`). A slip that grows
+        fast for a moment and then stays is the linear region's transient: a tyre with
+        relaxation lags the slip as the pedal goes down, and its force seems not to follow."""
         o = self.options
-        since, _reached, confirmed = self._runaway[wheel]
-        if self._last_sample_s - since <= o.runaway_confirm_s:
-            return confirmed
+        state = self._runaway[wheel]
+        if self._last_sample_s - state[0] <= o.runaway_confirm_s:
+            return state[2]
         if running_away:
-            self._runaway[wheel] = [self._last_sample_s, lam_hi, False]
+            self._runaway[wheel] = [self._last_sample_s, lam_hi, False, lam_hi, math.nan, math.inf]
         return False
 
-    def _follow_runaways(self, now_s: float, slips: Sequence[float]) -> None:
-        """Per sample, the slip of each wheel with an unconfirmed runaway: running on to twice
-        the slip it reached, and by `runaway_confirm_slip` at least, confirms it."""
+    def _follow_runaways(self, now_s: float, speed: float, slips: Sequence[float], mus: Sequence[float]) -> None:
+        """Per sample, each wheel with an unconfirmed runaway. Past its peak, with the brake
+        torque above what the road can take, the slip runs on towards lock-up until the torque
+        falls: running on to twice the slip reached (and by `runaway_confirm_slip`) confirms
+        it. So does the slip falling back to half its highest while the force stays within 80 %
+        of what it was there, for longer than a tyre's relaxation (`MAX_RELAXATION_M` / v):
+        from the plateau or past the peak the force does not follow the slip down; a driver's
+        release from below the peak takes the force with it once the tyre has relaxed (and an
+        ABS release is evidence of its own: `abs_activity`)."""
         o = self.options
+        relaxed_s = max(0.05, MAX_RELAXATION_M / max(speed, 1.0))
         for i in range(N_WHEELS):
             state = self._runaway[i]
             if state[2] or now_s - state[0] > o.runaway_confirm_s:
                 continue
-            reached = state[1]
-            if slips[i] >= max(2.0 * reached, reached + o.runaway_confirm_slip):   # (False for NaN)
+            slip, mu = slips[i], mus[i]
+            if not (slip == slip and mu == mu):
+                continue
+            if slip >= max(2.0 * state[1], state[1] + o.runaway_confirm_slip):
                 state[2] = True
+            elif slip >= state[3] or state[4] != state[4]:
+                state[3], state[4], state[5] = max(slip, state[3]), mu, math.inf
+            elif slip <= 0.5 * state[3] and mu >= 0.8 * state[4] > 0.0:
+                state[5] = min(state[5], now_s)
+                state[2] = now_s - state[5] >= relaxed_s
+            else:
+                state[5] = math.inf
 
     @staticmethod
     def _bending(lam_hi: float, s2: float, s3: float, s4: float, y1: float, y2: float) -> Any:

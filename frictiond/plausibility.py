@@ -56,6 +56,7 @@ RIVAL_CYCLES = 3.0                  # a second source silent this many cycles ha
 # Two sources' frames fit the genuine track clearly better or worse when their misfits (squared
 # deviations in each signal's noise allowance and in the bus's jitter) differ by more than this.
 SOURCES_DIFFER = 1.0
+FITS = 9.0                          # ... and a frame fits a track within 3 allowances (in one signal, or in time)
 JITTER_SHARE = 0.15                 # a sender's frames keep its cycle within this share of it (the timing's allowance)
 FLOOD_RATE_FACTOR = 2.25            # more frames than this many times the message's rate: a flood
 SHARE_TIME_CONSTANT_S = 1.0         # `suspect_share` averages over about this long
@@ -63,9 +64,10 @@ SHARE_TIME_CONSTANT_S = 1.0         # `suspect_share` averages over about this l
 # regular stream arriving late, a frame the codec cannot read, a timestamp a second off):
 # counted, not in the suspect share. What is left (out of range, rate, spike, second source,
 # a wheel-speed glitch) says that values near the plausible are corrupted too, and some get through.
-# (A second node's frames are plausible by design: which of two streams is genuine is a judgement
-# from their values and cycles, and the frame of one misjudged goes to the fit.)
-HARMLESS = frozenset({"duplicate", "out of order", "undecodable", "clock step"})
+# A second node's frames told apart by their values and cycles are refused as surely; those that
+# could not be told apart, and one taken before the genuine frame showed it up, are suspect
+# (`_unsure`, `_revoke`): which of two plausible streams is genuine is then a judgement.
+HARMLESS = frozenset({"duplicate", "out of order", "undecodable", "clock step", "second source"})
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,6 +126,12 @@ def _is_marker(values: Mapping[str, float], previous: Mapping[str, float], limit
                 return False
             checked = True
     return checked and any(abs(previous.get(name, 0.0)) > limits[name].active for name in values if name in limits)
+
+
+def _clear(a: float, b: float) -> bool:
+    """Whether two misfits tell which sender a frame is from: both fit (the same values: either
+    will do), or one fits and the other clearly does not."""
+    return max(a, b) <= SOURCES_DIFFER or (min(a, b) <= FITS and abs(a - b) > SOURCES_DIFFER)
 
 
 def _predict(frames, time_s: float, period_s: float) -> dict[str, float] | None:
@@ -229,10 +237,11 @@ class InputGate:
         if track is None:
             return None
         kind = self._clock(time_s, track, values)
+        if track.rival and self._bus_time_s - track.rival_s > RIVAL_CYCLES * track.period_s:
+            track.rival.clear()     # (the second node has stopped: one sender again)
         if not track.rival:
             track.cadence_s = min(2.0 * track.period_s, max(track.interval_s, 0.5 * track.period_s))
-        if kind == "second source" or (kind is None and track.rival and self._bus_time_s - track.rival_s
-                                       <= RIVAL_CYCLES * track.period_s):
+        if kind == "second source" or (kind is None and track.rival):
             kind = self._choose_source(time_s, message, track, values, kind)
         if kind is None:
             kind = self._values(time_s, track, values)
@@ -240,10 +249,12 @@ class InputGate:
                 kind = None
                 self.reanchored.add(message)
         if math.isfinite(time_s) and time_s > track.arrival_s:
-            # (all arrivals: a message really sent faster than its DBC says is not a second source)
+            # (all arrivals: a message really sent faster than its DBC says is not a second source;
+            # but not while two nodes send it: the cycle measured is the genuine sender's)
             if track.arrival_s > -math.inf:
-                gap = min(time_s - track.arrival_s, 4.0 * track.period_s)
-                track.interval_s += (gap - track.interval_s) / 200.0
+                if not track.rival:
+                    gap = min(time_s - track.arrival_s, 4.0 * track.period_s)
+                    track.interval_s += (gap - track.interval_s) / 200.0
                 track.arrival_gap_s = time_s - track.arrival_s
             track.arrival_s = time_s
         if kind is None:
@@ -338,13 +349,17 @@ class InputGate:
         when neither fits and they fit about as badly are the next samples not fitted.
         """
         now = self._bus_time_s
-        if not track.rival or now - track.rival_s > RIVAL_CYCLES * track.period_s:
-            track.rival.clear()
-            if kind != "second source":     # (early after the last accepted frame: a second node)
-                return None
+        if not track.rival:     # (early after the last accepted frame: a second node)
             return self._first_rival_frame(time_s, message, track, values)
-        if now - track.time_s > RIVAL_CYCLES * track.period_s:
-            return None     # (the track followed has gone silent: the source still sending is the message's)
+        if time_s - track.time_s > RIVAL_CYCLES * track.period_s:
+            # The track followed has gone silent: the source still sending is the message's
+            # (taken over with its frames; the front end restarts its filter at the step).
+            track.accepted.clear()
+            track.accepted.extend(track.rival)
+            track.time_s, track.values = track.accepted[-1]
+            track.rival.clear()
+            self.reanchored.add(message)
+            return None
         rival = self._misfit(track, track.rival, time_s, values)
         accepted = track.accepted
         if time_s - track.time_s < 0.5 * track.cadence_s and len(accepted) >= 3:
@@ -355,16 +370,16 @@ class InputGate:
             before = list(accepted)[:-1]
             keep = self._misfit(track, before, last_time, last_values) + rival
             swap = self._misfit(track, before, time_s, values) + self._misfit(track, track.rival, last_time, last_values)
-            if abs(keep - swap) <= SOURCES_DIFFER and min(keep, swap) > SOURCES_DIFFER:
+            if not _clear(keep, swap):
                 self._unsure()
-            if swap < keep - SOURCES_DIFFER:
+            if swap < keep - SOURCES_DIFFER and swap <= FITS:
                 self._revoke(message, track, now)
                 return None
             kind = "second source"
         else:
             genuine = self._misfit(track, accepted, time_s, values)
             kind = None if genuine <= rival else "second source"
-            if abs(genuine - rival) <= SOURCES_DIFFER and min(genuine, rival) > SOURCES_DIFFER:
+            if not _clear(genuine, rival):
                 self._unsure()
         if kind is not None:
             track.rival.append((time_s, dict(values)))
@@ -401,11 +416,11 @@ class InputGate:
         last_time, last_values = accepted[-1]
         last = self._misfit(track, before, last_time, last_values)
         new = self._misfit(track, before, time_s, values)
-        if last - new > SOURCES_DIFFER:
+        if not _clear(last, new):
+            self._unsure()
+        if last - new > SOURCES_DIFFER and new <= FITS:
             self._revoke(message, track, self._bus_time_s)
             return None
-        if new - last <= SOURCES_DIFFER and new > SOURCES_DIFFER:
-            self._unsure()
         track.rival.append((time_s, dict(values)))
         return "second source"
 

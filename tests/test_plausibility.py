@@ -277,7 +277,8 @@ def test_a_second_node_replaying_a_message_is_told_apart_by_its_values(phase):
     assert spoofed.count(None) == len(revoked) == (1 if phase > 0.6 else 0)
     assert spoofed.count("second source") == len(spoofed) - len(revoked)
     assert gate.counts["second source"] == len(spoofed)
-    assert gate.suspect_share() > 0.2       # (a third of the last second's frames: it costs the VALID)
+    # (told apart with certainty: no suspect input but the one frame taken before it was seen)
+    assert gate.suspect_share() == pytest.approx(len(revoked) / len(frames), abs=0.01)
 
 
 def test_a_revoked_wheel_speed_frame_leaves_no_trace_in_the_front_end():
@@ -302,3 +303,21 @@ def test_a_revoked_wheel_speed_frame_leaves_no_trace_in_the_front_end():
     assert spoofed.gate.counts["second source"] == 1
     assert spoofed._speed_estimate_mps == pytest.approx(plain._speed_estimate_mps, abs=1e-9)
     assert spoofed._history["WHEELS"].series["wheel_speed_fl"][1][-1] == plain._history["WHEELS"].series["wheel_speed_fl"][1][-1]
+
+
+def test_when_the_followed_sender_falls_silent_the_one_still_sending_is_followed():
+    # Two nodes send PRESS, half a cycle apart, at different levels; at 0.5 s the followed one
+    # stops. The other is the only sender of the message now: followed after three cycles.
+    gate = InputGate(VEH, {"PRESS": 0.01})
+    verdicts = {}
+    for k in range(100):
+        if k < 50:
+            verdicts[0.01 * k] = gate.admit(0.01 * k, "PRESS", dict.fromkeys(PRESSURE_NAMES, 50.0 + 0.1 * k))
+        if k >= 20:
+            t = 0.01 * k + 0.005
+            verdicts[t] = gate.admit(t, "PRESS", dict.fromkeys(PRESSURE_NAMES, 80.0 - 0.1 * k))
+    followed = [t for t, kind in verdicts.items() if kind is None]
+    assert all(t < 0.5 or t > 0.52 for t in followed)   # (three cycles after the last of the followed one)
+    assert [t for t in followed if t > 0.5][0] < 0.55 and all(verdicts[t] is None for t in verdicts if t > 0.55)
+    assert all(verdicts[t] == "second source" for t in verdicts if 0.2 < t < 0.5 and round(t * 1000) % 10 == 5)
+    assert "PRESS" in gate.reanchored

@@ -128,6 +128,11 @@ def _is_marker(values: Mapping[str, float], previous: Mapping[str, float], limit
     return checked and any(abs(previous.get(name, 0.0)) > limits[name].active for name in values if name in limits)
 
 
+def _flooded(track: "_Track") -> bool:
+    """More frames of the message in the last 0.1 s than `FLOOD_RATE_FACTOR` times its rate."""
+    return len(track.arrivals) >= FLOOD_RATE_FACTOR * 0.1 / track.period_s
+
+
 def _clear(a: float, b: float) -> bool:
     """Whether two misfits tell which sender a frame is from: both fit (the same values: either
     will do), or one fits and the other clearly does not."""
@@ -351,9 +356,10 @@ class InputGate:
         now = self._bus_time_s
         if not track.rival:     # (early after the last accepted frame: a second node)
             return self._first_rival_frame(time_s, message, track, values)
-        if time_s - track.time_s > RIVAL_CYCLES * track.period_s:
+        if time_s - track.time_s > RIVAL_CYCLES * track.period_s and not _flooded(track):
             # The track followed has gone silent: the source still sending is the message's
             # (taken over with its frames; the front end restarts its filter at the step).
+            # Not in a flood: there no sender can be followed (a FAULT, `persistent`).
             track.accepted.clear()
             track.accepted.extend(track.rival)
             track.time_s, track.values = track.accepted[-1]
@@ -504,7 +510,7 @@ class InputGate:
             return track.last_reject
         if len(track.recent) >= 8:
             return track.last_reject or "rate"
-        if len(track.arrivals) >= FLOOD_RATE_FACTOR * 0.1 / track.period_s:
+        if _flooded(track):
             return "second source"
         return None
 

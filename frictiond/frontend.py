@@ -315,6 +315,7 @@ class FrontEnd:
         # Frame-level plausibility (issue 22): a corrupted frame never reaches the histories.
         self.gate = InputGate(self.vehicle, {m: h.period_s for m, h in self._history.items()})
         self._abs_activity.reset()
+        self._before_sample: tuple | None = None
         self._wheel_times: deque[float] = deque(maxlen=n)
         self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
         self._speed_estimate_mps: float | None = None
@@ -401,6 +402,10 @@ class FrontEnd:
                 self.gate.note(time_s, "duplicate" if dt == 0.0 else "out of order")
                 return None
         rejected = self.gate.admit(time_s, message, values)
+        if self.gate.revoked:
+            for taken, taken_s in self.gate.revoked.items():
+                self._take_back(taken, taken_s)
+            self.gate.revoked.clear()
         if rejected is not None:
             # Rejected: no sample from a wheel-speed frame that cannot be true (the last estimate
             # is repeated), a fault when they keep coming; nothing at all for a frame whose time
@@ -426,6 +431,33 @@ class FrontEnd:
             self.gate.repair_spike(message, history.series)
             return None
         return self._on_trigger(time_s, history)
+
+    def _take_back(self, message: str, time_s: float) -> None:
+        """A frame already pushed that the gate has since found to be a second node's (`revoked`):
+        out of the message's histories, and out of the wheel-speed window, so that no later
+        sample's derivative or interpolation includes it. (A sample made from it alone is gone.)"""
+        history = self._history.get(message)
+        if history is None or time_s != time_s:
+            return
+        merged = history.merged
+        for name, (times, values) in history.series.items():
+            if times and times[-1] == time_s:
+                times.pop()
+                values.pop()
+                if values:
+                    merged[name] = values[-1]
+        if message == self.trigger_message and self._wheel_times and self._wheel_times[-1] == time_s:
+            self._wheel_times.pop()
+            self._wheel_speeds.pop()
+            self._last_trigger_s = self._wheel_times[-1] if self._wheel_times else -math.inf
+            before = self._before_sample
+            if before is not None and before[0] == time_s:
+                # Its sample taught the speed observer and the learnt state: back as they were
+                # (the next sample has the same window centre: the observer would restart at
+                # the fastest wheel, every slip zero for the rest of the stop).
+                _, self._speed_estimate_mps, self._speed_time_s, self._last_sample_time_s, learnt = before
+                for name, value in zip(_LEARNT_STATE, learnt):
+                    setattr(self, name, value)
 
     def _persistent_fault(self) -> str | None:
         """A fault naming the required message whose frames keep being rejected, if any."""
@@ -479,6 +511,9 @@ class FrontEnd:
             return FrontEndResult(None, (), fault)
         if stale:
             return FrontEndResult(None, stale, None)
+        # (what this sample will teach, as it was: put back if its frame is revoked, `_take_back`)
+        self._before_sample = (time_s, self._speed_estimate_mps, self._speed_time_s, self._last_sample_time_s,
+                               [getattr(self, name) for name in _LEARNT_STATE])
         if self._newest_suspect() or self.gate.contested(time_s):
             result = self._suspect_sample(stale)
         else:

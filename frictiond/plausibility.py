@@ -12,7 +12,10 @@ fit), `InputGate.admit` checks them against
 - the message's own clock: a frame older than the message's last one (reordered, or a single
   frame stepped back), a frame far from the bus's time (a clock step, either way: followed only
   once enough frames agree on it), an exact repeat, and a frame arriving much sooner than the
-  message's cycle (a second node sending the same message).
+  message's cycle (a second node sending the same message). Then the two senders' frames are
+  told apart by their values and cycles (`_choose_source`): the genuine one is followed, the
+  other's frames are rejected, and a frame taken before the other showed it up is revoked
+  (`revoked`: the front end takes it out of its histories).
 
 A frame that breaks any of them is rejected whole (a random payload rarely breaks only one
 signal) and counted by kind. After it is accepted, `repair_spike` looks back one frame: a value
@@ -49,12 +52,21 @@ CLOCK_STEP_S = 0.25                 # a frame this far from the bus's time is a 
 REORDER_S = 0.05                    # ... or this far behind its message's last frame
 EARLY_SHARE_OF_PERIOD = 0.6         # sooner than this share of the cycle: a second source (±2 ms jitter at 10 ms)
 CONTEST_S = 0.15                    # samples this long after a second source's frame are not fitted (a 50 Hz window)
+RIVAL_CYCLES = 3.0                  # a second source silent this many cycles has stopped: one track again
+# Two sources' frames fit the genuine track clearly better or worse when their misfits (squared
+# deviations in each signal's noise allowance and in the bus's jitter) differ by more than this.
+SOURCES_DIFFER = 1.0
+FITS = 9.0                          # ... and a frame fits a track within 3 allowances (in one signal, or in time)
+JITTER_SHARE = 0.15                 # a sender's frames keep its cycle within this share of it (the timing's allowance)
 FLOOD_RATE_FACTOR = 2.25            # more frames than this many times the message's rate: a flood
 SHARE_TIME_CONSTANT_S = 1.0         # `suspect_share` averages over about this long
 # Kinds of rejection that are certain and carry no wrong value (an exact repeat, a frame of a
 # regular stream arriving late, a frame the codec cannot read, a timestamp a second off):
 # counted, not in the suspect share. What is left (out of range, rate, spike, second source,
 # a wheel-speed glitch) says that values near the plausible are corrupted too, and some get through.
+# A second node's frames told apart by their values and cycles are refused as surely; those that
+# could not be told apart, and one taken before the genuine frame showed it up, are suspect
+# (`_unsure`, `_revoke`): which of two plausible streams is genuine is then a judgement.
 HARMLESS = frozenset({"duplicate", "out of order", "undecodable", "clock step", "second source"})
 
 
@@ -116,11 +128,38 @@ def _is_marker(values: Mapping[str, float], previous: Mapping[str, float], limit
     return checked and any(abs(previous.get(name, 0.0)) > limits[name].active for name in values if name in limits)
 
 
+def _flooded(track: "_Track") -> bool:
+    """More frames of the message in the last 0.1 s than `FLOOD_RATE_FACTOR` times its rate."""
+    return len(track.arrivals) >= FLOOD_RATE_FACTOR * 0.1 / track.period_s
+
+
+def _clear(a: float, b: float) -> bool:
+    """Whether two misfits tell which sender a frame is from: both fit (the same values: either
+    will do), or one fits and the other clearly does not."""
+    return max(a, b) <= SOURCES_DIFFER or (min(a, b) <= FITS and abs(a - b) > SOURCES_DIFFER)
+
+
+def _predict(frames, time_s: float, period_s: float) -> dict[str, float] | None:
+    """A track's values at `time_s`: on the line through its last two frames (a signal's trend),
+    held at the last when they are closer than half a cycle or more than a few cycles apart, or
+    old (extrapolated far, the line says nothing); None without a frame."""
+    if not frames:
+        return None
+    t1, v1 = frames[-1]
+    if len(frames) < 2:
+        return v1
+    t0, v0 = frames[-2]
+    if not 0.5 * period_s <= t1 - t0 <= 3.0 * period_s or not 0.0 <= time_s - t1 <= 3.0 * period_s:
+        return v1   # (two frames much closer than a cycle: their slope is mostly noise)
+    w = (time_s - t1) / (t1 - t0)
+    return {name: x + w * (x - v0[name]) if name in v0 else x for name, x in v1.items()}
+
+
 class _Track:
     """One message's accepted history as the gate sees it."""
 
     __slots__ = ("period_s", "time_s", "values", "arrival_s", "arrival_gap_s", "interval_s", "rejects", "last_reject",
-                 "recent", "arrivals", "rejected", "agreeing")
+                 "recent", "arrivals", "rejected", "agreeing", "accepted", "rival", "rival_s", "cadence_s")
 
     def __init__(self, period_s: float) -> None:
         self.period_s = period_s
@@ -135,6 +174,10 @@ class _Track:
         self.arrivals: deque[float] = deque()   # times of the frames of the last 0.1 s
         self.rejected: tuple[float, dict[str, float]] | None = None   # the last frame rejected for its rate
         self.agreeing = 0                       # ... and how many before it agreed, each with the next
+        self.accepted: deque[tuple[float, dict[str, float]]] = deque(maxlen=3)   # the last accepted frames
+        self.rival: deque[tuple[float, dict[str, float]]] = deque(maxlen=2)      # a second source's last frames
+        self.rival_s = -math.inf                # (bus time) of its last frame
+        self.cadence_s = period_s               # the sender's own cycle, as measured before a second one came
 
 
 class InputGate:
@@ -153,8 +196,12 @@ class InputGate:
         self._step_frames = 0
         self._share_time_s = -math.inf
         self._share_all = self._share_bad = 0.0
-        self._contested_s = -math.inf     # the last frame of a second source
+        self._contested_s = -math.inf     # the last frame of a second source whose values could not tell it
+        self._doubt = False               # ... and whether the frame being admitted was one
         self.reanchored: set[str] = set()  # messages followed to a new level (the caller clears)
+        # An accepted frame found to be a second source's once the genuine one arrived (message:
+        # its time): the caller takes it out of its histories and clears the entry.
+        self.revoked: dict[str, float] = {}
 
     # -- the suspect share -------------------------------------------------------------------
     def note(self, time_s: float, kind: str | None) -> None:
@@ -195,23 +242,29 @@ class InputGate:
         if track is None:
             return None
         kind = self._clock(time_s, track, values)
+        if track.rival and self._bus_time_s - track.rival_s > RIVAL_CYCLES * track.period_s:
+            track.rival.clear()     # (the second node has stopped: one sender again)
+        if not track.rival:
+            track.cadence_s = min(2.0 * track.period_s, max(track.interval_s, 0.5 * track.period_s))
+        if kind == "second source" or (kind is None and track.rival):
+            kind = self._choose_source(time_s, message, track, values, kind)
         if kind is None:
             kind = self._values(time_s, track, values)
             if kind == "rate" and self._follows_new_level(time_s, track, values):
                 kind = None
                 self.reanchored.add(message)
         if math.isfinite(time_s) and time_s > track.arrival_s:
-            # (all arrivals: a message really sent faster than its DBC says is not a second source)
+            # (all arrivals: a message really sent faster than its DBC says is not a second source;
+            # but not while two nodes send it: the cycle measured is the genuine sender's)
             if track.arrival_s > -math.inf:
-                gap = min(time_s - track.arrival_s, 4.0 * track.period_s)
-                track.interval_s += (gap - track.interval_s) / 200.0
+                if not track.rival:
+                    gap = min(time_s - track.arrival_s, 4.0 * track.period_s)
+                    track.interval_s += (gap - track.interval_s) / 200.0
                 track.arrival_gap_s = time_s - track.arrival_s
             track.arrival_s = time_s
         if kind is None:
             self._accept(time_s, message, track, values)
-        elif kind == "second source":
-            self._contested_s = max(self._contested_s, self._bus_time_s)
-        else:
+        elif kind != "second source":
             track.rejects += 1
             track.last_reject = kind
             if kind not in HARMLESS:
@@ -223,6 +276,10 @@ class InputGate:
             while times and not now - 0.1 < times[0] <= now:
                 times.popleft()
         self.note(time_s, kind)
+        if self._doubt:
+            self._doubt = False
+            if kind is None or kind in HARMLESS:
+                self._share_bad += 1.0
         return kind
 
     def _follows_new_level(self, time_s: float, track: _Track, values: Mapping[str, float]) -> bool:
@@ -241,6 +298,7 @@ class InputGate:
             self.reanchored.add(message)
         track.time_s = time_s
         track.values = dict(values)
+        track.accepted.append((time_s, track.values))
         track.rejects = track.agreeing = 0
         track.rejected = None
         self._bus_time_s = max(self._bus_time_s, time_s)
@@ -262,8 +320,10 @@ class InputGate:
                 return "clock step"
             self._bus_time_s = time_s
             for t in self._tracks.values():     # a new time base: the old histories mean nothing
-                t.time_s = t.arrival_s = -math.inf
+                t.time_s = t.arrival_s = t.rival_s = -math.inf
                 t.values = {}
+                t.accepted.clear()
+                t.rival.clear()
             return None
         self._step_frames = 0
         dt = time_s - track.time_s
@@ -279,6 +339,119 @@ class InputGate:
                 and (time_s - track.arrival_s) + track.arrival_gap_s < (1.0 + EARLY_SHARE_OF_PERIOD) * cycle):
             return "second source"
         return None
+
+    # -- two sources -------------------------------------------------------------------------
+    def _choose_source(self, time_s: float, message: str, track: _Track, values: Mapping[str, float],
+                       kind: str | None) -> str | None:
+        """A frame of a message that two nodes send: None when it continues the genuine track
+        (its values checked after), else "second source".
+
+        A second node's frames are each plausible, and it sends at the message's own rate. What
+        tells the two apart: the genuine sensor's signal continues its own trend (a wheel, a
+        pressure, a car's acceleration cannot jump between frames; a replayed or foreign stream
+        does not), and each node keeps its own cycle (a frame is due one cycle after its
+        sender's last). Each frame goes to the track it fits better by both (`_misfit`). Only
+        when neither fits and they fit about as badly are the next samples not fitted.
+        """
+        now = self._bus_time_s
+        if not track.rival:     # (early after the last accepted frame: a second node)
+            return self._first_rival_frame(time_s, message, track, values)
+        if time_s - track.time_s > RIVAL_CYCLES * track.period_s and not _flooded(track):
+            # The track followed has gone silent: the source still sending is the message's
+            # (taken over with its frames; the front end restarts its filter at the step).
+            # Not in a flood: there no sender can be followed (a FAULT, `persistent`).
+            track.accepted.clear()
+            track.accepted.extend(track.rival)
+            track.time_s, track.values = track.accepted[-1]
+            track.rival.clear()
+            self.reanchored.add(message)
+            return None
+        rival = self._misfit(track, track.rival, time_s, values)
+        accepted = track.accepted
+        if time_s - track.time_s < 0.5 * track.cadence_s and len(accepted) >= 3:
+            # The accepted frame of this cycle and this one: one node's each. Judged as a pair
+            # against each sender's frames before them, so that one frame taken wrongly (a wheel
+            # under ABS can leave its trend as far as a replay does) is put right a frame later.
+            last_time, last_values = accepted[-1]
+            before = list(accepted)[:-1]
+            keep = self._misfit(track, before, last_time, last_values) + rival
+            swap = self._misfit(track, before, time_s, values) + self._misfit(track, track.rival, last_time, last_values)
+            if not _clear(keep, swap):
+                self._unsure()
+            if swap < keep - SOURCES_DIFFER and swap <= FITS:
+                self._revoke(message, track, now)
+                return None
+            kind = "second source"
+        else:
+            genuine = self._misfit(track, accepted, time_s, values)
+            kind = None if genuine <= rival else "second source"
+            if not _clear(genuine, rival):
+                self._unsure()
+        if kind is not None:
+            track.rival.append((time_s, dict(values)))
+            track.rival_s = now
+        return kind
+
+    def _revoke(self, message: str, track: _Track, now: float) -> None:
+        """The last accepted frame was the second node's: out of the track (back to the one
+        before), to the rival's, counted; the caller takes it out of its histories (`revoked`)."""
+        last_time, last_values = track.accepted.pop()
+        track.time_s, track.values = track.accepted[-1]
+        track.rival.append((last_time, last_values))
+        track.rival_s = now
+        self.revoked[message] = last_time
+        self.counts["second source"] += 1
+        self._share_bad += 1.0
+
+    def _unsure(self) -> None:
+        """Which of two sources sent a frame is not certain: the next samples are not fitted,
+        and the frame counts as suspect."""
+        self._contested_s = max(self._contested_s, self._bus_time_s)
+        self._doubt = True
+
+    def _first_rival_frame(self, time_s: float, message: str, track: _Track, values: Mapping[str, float]) -> str | None:
+        """The first frame seen early after the message's last accepted one: one of the two is a
+        second node's. The one that fits the frames before them is genuine; when that is the
+        newer, the accepted one is revoked (counted as the second source's)."""
+        track.rival_s = self._bus_time_s
+        accepted = track.accepted
+        if len(accepted) < 2 or accepted[-1][0] != track.time_s:
+            track.rival.append((time_s, dict(values)))
+            return "second source"
+        before = list(accepted)[:-1]
+        last_time, last_values = accepted[-1]
+        last = self._misfit(track, before, last_time, last_values)
+        new = self._misfit(track, before, time_s, values)
+        if not _clear(last, new):
+            self._unsure()
+        if last - new > SOURCES_DIFFER and new <= FITS:
+            self._revoke(message, track, self._bus_time_s)
+            return None
+        track.rival.append((time_s, dict(values)))
+        return "second source"
+
+    def _misfit(self, track: _Track, frames, time_s: float, values: Mapping[str, float]) -> float:
+        """How badly a frame fits a sender's frames: its values off their trend (`_distance`)
+        plus its time off their cycle, in the bus's jitter (a lost frame: the next cycle)."""
+        cycle = track.cadence_s
+        since = time_s - frames[-1][0]
+        late = since - max(1.0, round(since / cycle)) * cycle
+        return self._distance(values, _predict(frames, time_s, track.period_s)) + (late / (JITTER_SHARE * cycle)) ** 2
+
+    def _distance(self, values: Mapping[str, float], predicted: Mapping[str, float] | None) -> float:
+        """How far a frame's values are from a prediction: the sum of each signal's squared
+        deviation in its noise allowance (each signal is evidence; a replay is off in most of
+        them); inf without a prediction or for a non-finite value."""
+        if predicted is None:
+            return math.inf
+        bounds = self._bounds
+        total = 0.0
+        for name, x in values.items():
+            b = bounds.get(name)
+            p = predicted.get(name)
+            if b is not None and p is not None:
+                total += ((x - p) / b[4]) ** 2
+        return total if total == total else math.inf
 
     def _values(self, time_s: float, track: _Track, values: Mapping[str, float]) -> str | None:
         bounds = self._bounds
@@ -337,7 +510,7 @@ class InputGate:
             return track.last_reject
         if len(track.recent) >= 8:
             return track.last_reject or "rate"
-        if len(track.arrivals) >= FLOOD_RATE_FACTOR * 0.1 / track.period_s:
+        if _flooded(track):
             return "second source"
         return None
 

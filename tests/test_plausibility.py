@@ -17,7 +17,7 @@ from frictiond.samples import Status
 from frictiond.sim_frames import input_codec_for, simulate_frames
 from frictiond.vehicle import VehicleParams
 
-from .test_frontend import MESSAGES, WheelDrive, feed_fl, make
+from .test_frontend import MESSAGES, Drive, WheelDrive, feed_fl, make
 
 VEH = VehicleParams()
 
@@ -98,7 +98,7 @@ def test_gate_rejects_implausible_frames_by_kind_and_follows_a_real_clock_step()
     assert gate.admit(0.01, "PRESS", dict(p, brake_pressure_fl=400.0)) == "out of range"
     assert gate.admit(0.02, "PRESS", dict(p, brake_pressure_fl=200.0)) == "rate"    # +150 bar in 20 ms
     assert gate.admit(0.03, "PRESS", dict(p, brake_pressure_fl=90.0)) is None      # +40 bar in 30 ms: a fast apply
-    assert gate.admit(0.033, "PRESS", p) == "second source"
+    assert gate.admit(0.033, "PRESS", dict(p, brake_pressure_fl=91.0)) == "second source"   # (the same values: timing)
     assert gate.admit(0.03, "PRESS", dict(p, brake_pressure_fl=90.0)) == "duplicate"
     assert gate.admit(-0.97, "PRESS", p) == "clock step"
     assert dict(gate.counts) == {"out of range": 1, "rate": 1, "second source": 1, "duplicate": 1, "clock step": 1}
@@ -244,3 +244,81 @@ def test_an_early_frame_after_a_late_one_is_jitter_not_a_second_source():
     assert [gate.admit(t, "PRESS", p) for t in (0.000, 0.010, 0.0245, 0.0295, 0.040)] == [None] * 5
     spoofed = [gate.admit(t, "PRESS", p) for t in (0.045, 0.050, 0.055, 0.060)]
     assert spoofed == ["second source", None, "second source", None]
+
+
+def abs_wheel(t: float) -> float:
+    """A braked wheel [rad/s]: 8 m/s² on a 0.31 m tyre, an ABS swinging it ±3 rad/s at 6 Hz."""
+    return 80.0 - 26.0 * t + 3.0 * math.sin(2.0 * math.pi * 6.0 * t)
+
+
+@pytest.mark.parametrize("phase", [0.3, 0.8])
+def test_a_second_node_replaying_a_message_is_told_apart_by_its_values(phase):
+    # The genuine sender every 10 ms (±0.5 ms jitter, seeded); from 0.6 s a second node sends the
+    # same message at the same rate, `phase` of a cycle later, with the values of 0.5 s before.
+    # Each of its frames is within every physical limit. At phase 0.8 its first frame comes
+    # before the genuine one of that cycle is due: taken, then revoked when the genuine one shows.
+    import random
+
+    rng = random.Random(5)
+    gate = InputGate(VEH, {"WHEELS": 0.01})
+    frames = []
+    for k in range(100):
+        t = 0.01 * k + rng.uniform(-0.0005, 0.0005)
+        frames.append((t, abs_wheel(t), True))
+        if k >= 60:
+            frames.append((0.01 * (k + phase), abs_wheel(0.01 * (k + phase) - 0.5), False))
+    frames.sort()
+    verdicts, revoked = [], []
+    for t, w, genuine in frames:
+        verdicts.append((genuine, gate.admit(t, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w))))
+        if gate.revoked:
+            revoked.append(gate.revoked.pop("WHEELS"))
+    spoofed = [kind for genuine, kind in verdicts if not genuine]
+    assert all(kind is None for genuine, kind in verdicts if genuine)
+    assert spoofed.count(None) == len(revoked) == (1 if phase > 0.6 else 0)
+    assert spoofed.count("second source") == len(spoofed) - len(revoked)
+    assert gate.counts["second source"] == len(spoofed)
+    # (told apart with certainty: no suspect input but the one frame taken before it was seen)
+    assert gate.suspect_share() == pytest.approx(len(revoked) / len(frames), abs=0.01)
+
+
+def test_a_revoked_wheel_speed_frame_leaves_no_trace_in_the_front_end():
+    # The second node's frame comes first in its cycle (taken), the genuine one 2 ms after it:
+    # the spoofed frame goes out of the window and the speed observer is as it was before it.
+    drive = Drive(v0=25.0, decel=6.0, slip=0.08)
+    plain, spoofed = make(), make()
+
+    def push(fe, t, w):
+        fe.push(t - 0.007, "ACCEL", {"accel_long": -drive.decel, "accel_lat": 0.0, "yaw_rate": 0.0})
+        fe.push(t - 0.004, "PRESS", dict.fromkeys(PRESSURE_NAMES, 60.0))
+        return fe.push(t, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w))
+
+    for k in range(1, 80):
+        t = 0.01 * k
+        push(plain, t, drive.omega(t))
+        if k == 60:   # (a replay of 0.5 s before: 10 rad/s faster, within every rate limit)
+            spoofed.push(t - 0.002, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, drive.omega(t - 0.5)))
+        push(spoofed, t, drive.omega(t))
+        if k == 60:
+            assert list(spoofed._wheel_times) == list(plain._wheel_times)
+    assert spoofed.gate.counts["second source"] == 1
+    assert spoofed._speed_estimate_mps == pytest.approx(plain._speed_estimate_mps, abs=1e-9)
+    assert spoofed._history["WHEELS"].series["wheel_speed_fl"][1][-1] == plain._history["WHEELS"].series["wheel_speed_fl"][1][-1]
+
+
+def test_when_the_followed_sender_falls_silent_the_one_still_sending_is_followed():
+    # Two nodes send PRESS, half a cycle apart, at different levels; at 0.5 s the followed one
+    # stops. The other is the only sender of the message now: followed after three cycles.
+    gate = InputGate(VEH, {"PRESS": 0.01})
+    verdicts = {}
+    for k in range(100):
+        if k < 50:
+            verdicts[0.01 * k] = gate.admit(0.01 * k, "PRESS", dict.fromkeys(PRESSURE_NAMES, 50.0 + 0.1 * k))
+        if k >= 20:
+            t = 0.01 * k + 0.005
+            verdicts[t] = gate.admit(t, "PRESS", dict.fromkeys(PRESSURE_NAMES, 80.0 - 0.1 * k))
+    followed = [t for t, kind in verdicts.items() if kind is None]
+    assert all(t < 0.5 or t > 0.52 for t in followed)   # (three cycles after the last of the followed one)
+    assert [t for t in followed if t > 0.5][0] < 0.55 and all(verdicts[t] is None for t in verdicts if t > 0.55)
+    assert all(verdicts[t] == "second source" for t in verdicts if 0.2 < t < 0.5 and round(t * 1000) % 10 == 5)
+    assert "PRESS" in gate.reanchored

@@ -401,6 +401,17 @@ class _Window:
         return self.slip[s], self.speed[s], self.mu[s], self.time[s], self.wheel[s]
 
 
+@dataclass(slots=True)
+class _Runaway:
+    """A wheel's latest runaway into slip, until confirmed or `runaway_confirm_s` old."""
+    since_s: float = -math.inf
+    reached: float = 0.0              # the slip it had reached when seen
+    confirmed: bool = False
+    highest: float = 0.0              # the highest slip since
+    mu_at_highest: float = math.nan   # ... and the force there
+    back_since_s: float = math.inf    # since when the slip is back at half that, the force not
+
+
 class _SmoothedMaximum:
     """The maximum, over a trailing span, of a series' mean over `smoothing_s`: O(1) a sample
     (a running sum for the mean, a monotonic queue for the maximum)."""
@@ -538,7 +549,7 @@ class LugreTrustRegionEstimator:
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
         self._abs_seen_s = [-math.inf] * N_WHEELS
-        self._runaway: list[list] = [[-math.inf, 0.0, False, 0.0, math.nan, math.inf] for _ in range(N_WHEELS)]
+        self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
         self._event_start_s = -math.inf
@@ -567,7 +578,7 @@ class LugreTrustRegionEstimator:
         self._body_mu.clear()
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
-        self._runaway = [[-math.inf, 0.0, False, 0.0, math.nan, math.inf] for _ in range(N_WHEELS)]
+        self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
@@ -1188,12 +1199,12 @@ class LugreTrustRegionEstimator:
     def _confidence(self, now_s: float, mu_max: float, mu_std: float, excitation: float) -> float:
         """0…1: how much to trust μ_max now.
 
-        The Gauss–Newton covariance alone measures noise, not model mismatch, and measured
-        against the simulator's truths it hardly predicts the error. Combined here: the delta-method
-        spread (half weight), the drift of μ_max over the last `drift_window_s` (an estimate still
-        moving is not settled), a floor for model mismatch, the excitation, a ramp over the
-        first `settle_s` of excitation (the first fits after onset are the worst), and the bias of
-        the newest residuals (a road changing under the fit).
+        The Gauss–Newton covariance alone measures noise, not model mismatch. Combined here: the
+        delta-method spread of μ_max (from the residuals' own size), the drift of μ_max over the
+        last `drift_window_s` (an estimate still moving is not settled), a floor for model
+        mismatch, the excitation, a ramp over the first `settle_s` of excitation (the first fits
+        after onset are the worst), and the bias of the newest residuals (a road changing under
+        the fit).
         """
         o = self.options
         history = self._mu_history
@@ -1445,10 +1456,10 @@ class LugreTrustRegionEstimator:
         relaxation lags the slip as the pedal goes down, and its force seems not to follow."""
         o = self.options
         state = self._runaway[wheel]
-        if self._last_sample_s - state[0] <= o.runaway_confirm_s:
-            return state[2]
+        if self._last_sample_s - state.since_s <= o.runaway_confirm_s:
+            return state.confirmed
         if running_away:
-            self._runaway[wheel] = [self._last_sample_s, lam_hi, False, lam_hi, math.nan, math.inf]
+            self._runaway[wheel] = _Runaway(self._last_sample_s, lam_hi, False, lam_hi)
         return False
 
     def _follow_runaways(self, now_s: float, speed: float, slips: Sequence[float], mus: Sequence[float]) -> None:
@@ -1464,20 +1475,21 @@ class LugreTrustRegionEstimator:
         relaxed_s = max(0.05, MAX_RELAXATION_M / max(speed, 1.0))
         for i in range(N_WHEELS):
             state = self._runaway[i]
-            if state[2] or now_s - state[0] > o.runaway_confirm_s:
+            if state.confirmed or now_s - state.since_s > o.runaway_confirm_s:
                 continue
             slip, mu = slips[i], mus[i]
             if not (slip == slip and mu == mu):
                 continue
-            if slip >= max(2.0 * state[1], state[1] + o.runaway_confirm_slip):
-                state[2] = True
-            elif slip >= state[3] or state[4] != state[4]:
-                state[3], state[4], state[5] = max(slip, state[3]), mu, math.inf
-            elif slip <= 0.5 * state[3] and mu >= 0.8 * state[4] > 0.0:
-                state[5] = min(state[5], now_s)
-                state[2] = now_s - state[5] >= relaxed_s
+            if slip >= max(2.0 * state.reached, state.reached + o.runaway_confirm_slip):
+                state.confirmed = True
+            elif slip >= state.highest or state.mu_at_highest != state.mu_at_highest:
+                state.highest, state.mu_at_highest = max(slip, state.highest), mu
+                state.back_since_s = math.inf
+            elif slip <= 0.5 * state.highest and mu >= 0.8 * state.mu_at_highest > 0.0:
+                state.back_since_s = min(state.back_since_s, now_s)
+                state.confirmed = now_s - state.back_since_s >= relaxed_s
             else:
-                state[5] = math.inf
+                state.back_since_s = math.inf
 
     @staticmethod
     def _bending(lam_hi: float, s2: float, s3: float, s4: float, y1: float, y2: float) -> Any:

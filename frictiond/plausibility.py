@@ -376,10 +376,7 @@ class InputGate:
             before = list(accepted)[:-1]
             keep = self._misfit(track, before, last_time, last_values) + rival
             swap = self._misfit(track, before, time_s, values) + self._misfit(track, track.rival, last_time, last_values)
-            if not _clear(keep, swap):
-                self._unsure()
-            if swap < keep - SOURCES_DIFFER and swap <= FITS:
-                self._revoke(message, track, now)
+            if self._newer_is_genuine(message, track, keep, swap):
                 return None
             kind = "second source"
         else:
@@ -391,6 +388,18 @@ class InputGate:
             track.rival.append((time_s, dict(values)))
             track.rival_s = now
         return kind
+
+    def _newer_is_genuine(self, message: str, track: _Track, keep: float, swap: float) -> bool:
+        """The accepted frame and a newer one, one of them a second node's: `keep` the misfit of
+        the senders as taken, `swap` with the two frames exchanged. When the exchange fits clearly
+        better (and fits at all), the accepted frame is revoked and the newer one is genuine;
+        when the misfits cannot tell, the frame is a judgement (`_unsure`)."""
+        if not _clear(keep, swap):
+            self._unsure()
+        if keep - swap > SOURCES_DIFFER and swap <= FITS:
+            self._revoke(message, track, self._bus_time_s)
+            return True
+        return False
 
     def _revoke(self, message: str, track: _Track, now: float) -> None:
         """The last accepted frame was the second node's: out of the track (back to the one
@@ -422,10 +431,7 @@ class InputGate:
         last_time, last_values = accepted[-1]
         last = self._misfit(track, before, last_time, last_values)
         new = self._misfit(track, before, time_s, values)
-        if not _clear(last, new):
-            self._unsure()
-        if last - new > SOURCES_DIFFER and new <= FITS:
-            self._revoke(message, track, self._bus_time_s)
+        if self._newer_is_genuine(message, track, last, new):
             return None
         track.rival.append((time_s, dict(values)))
         return "second source"

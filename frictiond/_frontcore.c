@@ -764,10 +764,11 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
         v = fastest;
     } else {
         v = v + accel_long * dt;
+        const double second = second_of(wl);
         if (!wheels_loaded) {
             v += k[K_GAIN_FREE] * (mean - v);
-        } else if (second_of(wl) > v) {
-            v += py_min(k[K_GAIN_UP] * (second_of(wl) - v), MAX_ABS_ACCEL * 0.5 * dt + 0.02);
+        } else if (second > v) {
+            v += py_min(k[K_GAIN_UP] * (second - v), MAX_ABS_ACCEL * 0.5 * dt + 0.02);
         } else {
             const double ceiling = fastest / (1.0 - k[K_MIN_BRAKED_SLIP]);
             if (v > ceiling)

@@ -955,13 +955,13 @@ class FrontEnd:
             v = fastest
         else:
             v = v + accel_long * dt
+            second = _second_fastest(wheel_linear)
             if not wheels_loaded:
                 v += opts.speed_gain_free_rolling * (mean - v)
-            elif _second_fastest(wheel_linear) > v:
+            elif second > v:
                 # Two wheels faster than the estimate pull it up, but no faster than a car can
                 # gain speed: one corrupt wheel speed must not carry it off (under ABS nothing
                 # pulls it down again: each glitch of one wheel ratcheted it up, every slip high).
-                second = _second_fastest(wheel_linear)
                 v += min(opts.speed_gain_up * (second - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
             else:
                 # Braked wheels all read low during ABS: even the least-braked one slips by

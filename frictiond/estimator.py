@@ -1154,17 +1154,18 @@ class LugreTrustRegionEstimator:
         tyre force over the weight: Σ μ_i F_N,i / Σ F_N,i ≤ Σ μ_max,i F_N,i / Σ F_N,i."""
         o = self.options
         best = self._body_mu.maximum(now_s - o.body_floor_window_s)
-        if best is None:
-            return 0.0
-        return best * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
+        return 0.0 if best is None else self._less_accelerometer_margins(best)
+
+    def _less_accelerometer_margins(self, body_mu: float) -> float:
+        """A body utilisation less what the accelerometer's offset and the car's pitch may add."""
+        o = self.options
+        return body_mu * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
 
     def _stop_floor(self) -> float:
         """The least μ_max the car's highest utilisation since this stop (or road) began allows,
         with the tolerance of a fit that rounds a sharp peak: a fit below it has forgotten the
         peak the car used (the wheels held deep in slip since), so its μ_max is not VALID."""
-        o = self.options
-        best = self._body_mu.highest
-        return (best * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin) * (1.0 - o.stop_floor_tolerance)
+        return self._less_accelerometer_margins(self._body_mu.highest) * (1.0 - self.options.stop_floor_tolerance)
 
     def _restate(self, last: FrictionEstimate, now_s: float) -> FrictionEstimate:
         """The last (CONVERGING) fit again, at a cycle without usable samples.

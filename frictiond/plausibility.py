@@ -166,7 +166,10 @@ class _Track:
         self.time_s = -math.inf                 # of the last accepted frame
         self.values: dict[str, float] = {}      # ... its values
         self.arrival_s = -math.inf              # of the last frame, accepted or not
-        self.arrival_gap_s = period_s           # ... since the frame before it
+        # ... since the frame before it; unknown (inf) for the first frame, so that the second
+        # frame of a message, however soon, is never judged early: a sender's first frames come
+        # as jittery as its start-up or a player's makes them, and there is no cycle to hold yet.
+        self.arrival_gap_s = math.inf
         self.interval_s = period_s              # slow mean of the arrival intervals
         self.rejects = 0                        # consecutive rejected frames
         self.last_reject = ""
@@ -321,6 +324,7 @@ class InputGate:
             self._bus_time_s = time_s
             for t in self._tracks.values():     # a new time base: the old histories mean nothing
                 t.time_s = t.arrival_s = t.rival_s = -math.inf
+                t.arrival_gap_s = math.inf
                 t.values = {}
                 t.accepted.clear()
                 t.rival.clear()

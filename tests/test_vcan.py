@@ -105,6 +105,22 @@ def compressed(statuses):
     return seq
 
 
+def stale_gaps(frames, periods: float = 3.0) -> set:
+    """(ID, index of the gap) where a message's interval exceeds the daemon's stale limit: three
+    of its median periods."""
+    times: dict[int, list[float]] = {}
+    for f in frames:
+        times.setdefault(f.can_id, []).append(f.time_s)
+    gaps = set()
+    for can_id, ts in times.items():
+        intervals = [b - a for a, b in zip(ts, ts[1:])]
+        if not intervals:
+            continue
+        limit = periods * sorted(intervals)[len(intervals) // 2]
+        gaps |= {(can_id, i) for i, d in enumerate(intervals) if d > limit}
+    return gaps
+
+
 def check_live_equals_replay(out: Path, name: str, codec, original: Path, against_log: bool = True) -> dict:
     capture = list(read_log(out / f"{name}-capture.log"))
     live = estimates(codec, read_log(out / f"{name}-est.log"))
@@ -139,7 +155,13 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     settled = int(1.0 / PERIOD_S)
     worst_settled = max(abs(a[2] - b[2]) for a, b in zip(caused[-settled:], from_log[-settled:]))
     worst = max((abs(a[2] - b[2]) for a, b in zip(caused, from_log) if a[1] == b[1] == "VALID"), default=math.nan)
-    if against_log:
+    # canplayer in the guest sometimes stalls for longer than the daemon's stale limit (seen at the
+    # start of a CI run): then the bus carried an input gap the log does not have, the daemon rightly
+    # said INPUT_STALE, and check 1 is the comparison that applies; this one is reported.
+    playback_gaps = stale_gaps(inputs_seen) - stale_gaps(played)
+    if playback_gaps:
+        assert "INPUT_STALE" in (s for _, s, _ in caused + ticks)
+    if against_log and not playback_gaps:
         assert caused[-1][1] == "VALID"
         assert agree >= 0.9, agree
         assert compressed(s for _, s, _ in caused)[:3] == compressed(s for _, s, _ in from_log)[:3]
@@ -152,7 +174,7 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     return {"updates": len(caused), "ticks": len(ticks), "status_agreement_vs_capture": round(agree_capture, 4),
             "max_valid_mu_diff_vs_capture": round(worst_capture, 4), "status_agreement_vs_log": round(agree, 4),
             "max_valid_mu_diff_vs_log": round(worst, 4), "max_settled_mu_diff_vs_log": round(worst_settled, 4),
-            "max_playback_timing_error_s": round(jitter, 4),
+            "max_playback_timing_error_s": round(jitter, 4), "playback_gaps_not_in_log": sorted(playback_gaps),
             "final": caused[-1], "final_replay_of_log": from_log[-1]}
 
 

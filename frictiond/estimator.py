@@ -53,9 +53,6 @@ from .vehicle import GRAVITY_MPS2, VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
 N_WHEELS = 4
-# A car tyre's longest relaxation length (0.1–0.6 m): its force lags a change of slip by up to
-# this over the speed.
-MAX_RELAXATION_M = 0.6
 
 
 @dataclass(frozen=True, slots=True)
@@ -407,9 +404,6 @@ class _Runaway:
     since_s: float = -math.inf
     reached: float = 0.0              # the slip it had reached when seen
     confirmed: bool = False
-    highest: float = 0.0              # the highest slip since
-    mu_at_highest: float = math.nan   # ... and the force there
-    back_since_s: float = math.inf    # since when the slip is back at half that, the force not
 
 
 class _SmoothedMaximum:
@@ -653,7 +647,7 @@ class LugreTrustRegionEstimator:
         slips, mus, wheels = [], [], []
         min_slip, isfinite, usable = o.min_slip, math.isfinite, sample.usable
         wheel_slips, wheel_mus = sample.slip, sample.mu_used
-        self._follow_runaways(t, v, wheel_slips, wheel_mus)
+        self._follow_runaways(t, wheel_slips)
         abs_active = sample.abs_active
         body_mu = sample.body_mu
         if body_mu == body_mu:   # (not NaN: braking, with a fresh accelerometer)
@@ -1460,37 +1454,25 @@ class LugreTrustRegionEstimator:
         if self._last_sample_s - state.since_s <= o.runaway_confirm_s:
             return state.confirmed
         if running_away:
-            self._runaway[wheel] = _Runaway(self._last_sample_s, lam_hi, False, lam_hi)
+            self._runaway[wheel] = _Runaway(self._last_sample_s, lam_hi)
         return False
 
-    def _follow_runaways(self, now_s: float, speed: float, slips: Sequence[float], mus: Sequence[float]) -> None:
+    def _follow_runaways(self, now_s: float, slips: Sequence[float]) -> None:
         """Per sample, each wheel with an unconfirmed runaway. Past its peak, with the brake
         torque above what the road can take, the slip runs on towards lock-up until the torque
         falls: running on to twice the slip reached (and by `runaway_confirm_slip`) confirms
-        it. So does the slip falling back to half its highest while the force stays within 80 %
-        of what it was there, for longer than a tyre's relaxation (`MAX_RELAXATION_M` / v):
-        from the plateau or past the peak the force does not follow the slip down; a driver's
-        release from below the peak takes the force with it once the tyre has relaxed (and an
-        ABS release is evidence of its own: `abs_activity`)."""
+        it. Nothing else does: a slip that falls back while the force holds is what a relaxing
+        tyre shows after the pedal's application (its force catching up with a slip that
+        overshot), as much as a wheel released from past its peak; an ABS release is evidence
+        of its own (`abs_activity`)."""
         o = self.options
-        relaxed_s = max(0.05, MAX_RELAXATION_M / max(speed, 1.0))
         for i in range(N_WHEELS):
             state = self._runaway[i]
             if state.confirmed or now_s - state.since_s > o.runaway_confirm_s:
                 continue
-            slip, mu = slips[i], mus[i]
-            if not (slip == slip and mu == mu):
-                continue
+            slip = slips[i]
             if slip >= max(2.0 * state.reached, state.reached + o.runaway_confirm_slip):
                 state.confirmed = True
-            elif slip >= state.highest or state.mu_at_highest != state.mu_at_highest:
-                state.highest, state.mu_at_highest = max(slip, state.highest), mu
-                state.back_since_s = math.inf
-            elif slip <= 0.5 * state.highest and mu >= 0.8 * state.mu_at_highest > 0.0:
-                state.back_since_s = min(state.back_since_s, now_s)
-                state.confirmed = now_s - state.back_since_s >= relaxed_s
-            else:
-                state.back_since_s = math.inf
 
     @staticmethod
     def _bending(lam_hi: float, s2: float, s3: float, s4: float, y1: float, y2: float) -> Any:

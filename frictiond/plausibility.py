@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from dataclasses import dataclass
+from math import exp as _exp
 from typing import Mapping, MutableMapping
 
 from .vehicle import GRAVITY_MPS2, VehicleParams
@@ -68,6 +69,7 @@ SHARE_TIME_CONSTANT_S = 1.0         # `suspect_share` averages over about this l
 # could not be told apart, and one taken before the genuine frame showed it up, are suspect
 # (`_unsure`, `_revoke`): which of two plausible streams is genuine is then a judgement.
 HARMLESS = frozenset({"duplicate", "out of order", "undecodable", "clock step", "second source"})
+_EARLY_PAIR = 1.0 + EARLY_SHARE_OF_PERIOD     # (the early test's bound on two intervals, as `_clock` computes it)
 
 
 @dataclass(frozen=True, slots=True)
@@ -192,6 +194,7 @@ class InputGate:
         self._bounds = {name: (lim.low, lim.high, lim.rate, lim.rate if lim.rise != lim.rise else lim.rise, lim.noise)
                         for name, lim in self.limits.items()}
         self._spike = {name: lim.spike for name, lim in self.limits.items() if lim.spike != math.inf}
+        self._active = {name: lim.active for name, lim in self.limits.items() if lim.active != math.inf}
         self._tracks = {m: _Track(p) for m, p in periods.items()}
         self.counts: Counter[str] = Counter()
         self._bus_time_s = -math.inf
@@ -240,10 +243,100 @@ class InputGate:
 
     # -- admission ---------------------------------------------------------------------------
     def admit(self, time_s: float, message: str, values: Mapping[str, float]) -> str | None:
-        """None to accept the frame, else the kind of rejection (already counted)."""
+        """None to accept the frame, else the kind of rejection (already counted).
+
+        Most frames are plain: one sender, on time, plausible values. They are accepted here, with
+        `_clock`'s, `_values`'s, `_accept`'s and `note`'s work for such a frame written out in one
+        place (every input frame passes: the calls and attribute lookups were most of the gate's
+        cost). Any other frame goes, before anything is changed, to `_admit_judged`, the reference:
+        both give the same verdict and leave the same state."""
         track = self._tracks.get(message)
         if track is None:
             return None
+        bus = self._bus_time_s
+        dt = time_s - track.time_s
+        # Plain so far: one sender, no rate rejections pending, near the bus's time, after the
+        # message's last frame (a NaN or infinite time fails a test; the first frame has no bus).
+        if (track.rival or track.rejected is not None
+                or not -CLOCK_STEP_S <= time_s - bus <= CLOCK_STEP_S or not dt > 0.0):
+            return self._admit_judged(time_s, message, track, values)
+        period = track.period_s
+        interval = track.interval_s
+        # (min and max written out, picking as they do: their calls were a sixth of this path's time)
+        held = 0.5 * period if 0.5 * period > interval else interval      # max(interval, period / 2)
+        cycle = held if held < period else period                          # min(period, held)
+        if (dt < EARLY_SHARE_OF_PERIOD * cycle
+                and (time_s - track.arrival_s) + track.arrival_gap_s < _EARLY_PAIR * cycle):   # (early: `_clock`)
+            return self._admit_judged(time_s, message, track, values)
+        # The values (`_values`): in range, within the rate limits, and not the sender's marker.
+        bounds = self._bounds
+        previous = track.values
+        live = False
+        for name, x in values.items():
+            b = bounds.get(name)
+            if b is None:
+                continue
+            if x > 0.002 or x < -0.002:
+                live = True
+            if not b[0] <= x <= b[1]:
+                return self._admit_judged(time_s, message, track, values)
+            last = previous.get(name)
+            if last is not None and abs(x - last) > (b[3] if x > last else b[2]) * dt + b[4]:
+                return self._admit_judged(time_s, message, track, values)
+        # A frame of zeros after a live one may be a marker (`_is_marker`): only signals with an
+        # `active` level can show the live one (a drive torque's frames, all zeros when coasting,
+        # have none: they pass without the look).
+        if not live and not self._active.keys().isdisjoint(values):
+            active = self._active
+            for name in values:
+                a = active.get(name)
+                if a is not None and abs(previous.get(name, 0.0)) > a:
+                    return self._admit_judged(time_s, message, track, values)
+        self._accept_plain(time_s, track, values, held)
+        return None
+
+    def _accept_plain(self, time_s: float, track: _Track, values: Mapping[str, float], held: float) -> None:
+        """A plain frame accepted (`admit`): the updates `_admit_judged` makes for it, in its order.
+        `held` is max(interval, period / 2) as `admit` found it."""
+        period = track.period_s
+        interval = track.interval_s
+        track.cadence_s = held if held < 2.0 * period else 2.0 * period    # min(2 period, held)
+        arrival = track.arrival_s
+        if time_s > arrival:
+            if arrival > -math.inf:
+                gap = time_s - arrival
+                gap = 4.0 * period if 4.0 * period < gap else gap                # min(gap, 4 periods)
+                track.interval_s = interval + (gap - interval) / 200.0
+                track.arrival_gap_s = time_s - arrival
+            track.arrival_s = time_s
+        track.time_s = time_s
+        track.values = kept = dict(values)
+        track.accepted.append((time_s, kept))
+        track.rejects = track.agreeing = 0
+        self._step_frames = 0
+        bus = self._bus_time_s
+        if time_s > bus:
+            self._bus_time_s = bus = time_s
+        recent = track.recent
+        while recent and not bus - 0.1 < recent[0] <= bus:
+            recent.popleft()
+        arrivals = track.arrivals
+        arrivals.append(bus)
+        while arrivals and not bus - 0.1 < arrivals[0] <= bus:
+            arrivals.popleft()
+        # (`note` for an accepted frame, on the bus's time, which is finite here)
+        since = bus - self._share_time_s
+        if since > 0.0:
+            keep = _exp(-since / SHARE_TIME_CONSTANT_S)
+            self._share_all *= keep
+            self._share_bad *= keep
+            self._share_time_s = bus
+        elif since < -CLOCK_STEP_S:
+            self._share_time_s = bus
+        self._share_all += 1.0
+
+    def _admit_judged(self, time_s: float, message: str, track: _Track, values: Mapping[str, float]) -> str | None:
+        """`admit` for every frame that is not plainly the one sender's next, plausible frame."""
         kind = self._clock(time_s, track, values)
         if track.rival and self._bus_time_s - track.rival_s > RIVAL_CYCLES * track.period_s:
             track.rival.clear()     # (the second node has stopped: one sender again)

@@ -343,3 +343,33 @@ def test_when_the_followed_sender_falls_silent_the_one_still_sending_is_followed
     assert [t for t in followed if t > 0.5][0] < 0.55 and all(verdicts[t] is None for t in verdicts if t > 0.55)
     assert all(verdicts[t] == "second source" for t in verdicts if 0.2 < t < 0.5 and round(t * 1000) % 10 == 5)
     assert "PRESS" in gate.reanchored
+
+
+class _ReferenceGate(InputGate):
+    """The gate without `admit`'s fast path: every frame goes through the full judgement."""
+
+    def admit(self, time_s, message, values):
+        track = self._tracks.get(message)
+        return None if track is None else self._admit_judged(time_s, message, track, values)
+
+
+def _gate_state(gate):
+    return (dict(gate.counts), gate.suspect_share(), set(gate.reanchored), gate._bus_time_s,
+            [(t.time_s, t.values, t.arrival_s, t.interval_s, t.cadence_s, list(t.arrivals), list(t.recent))
+             for t in gate._tracks.values()])
+
+
+@pytest.mark.parametrize("kind", [None, *corruption.KINDS])
+def test_the_fast_path_for_plain_frames_changes_no_verdict(default_config, kind):
+    """`admit` accepts a plain frame (one sender, on time, plausible) without the full judgement:
+    the outputs, counts, suspect share and tracks must stay those of the full judgement."""
+    frames, _ = stop(default_config, "split_mu")
+    if kind is not None:
+        frames, _ = corruption.corrupt(kind, frames, input_codec_for(default_config), 0.05, seed=2)
+    fast, reference = Pipeline(default_config), Pipeline(default_config)
+    front = reference.front_end
+    front.gate = _ReferenceGate(front.vehicle, {m: h.period_s for m, h in front._history.items()})
+    for frame in frames:
+        assert fast.process(frame) == reference.process(frame)
+        assert _gate_state(fast.front_end.gate) == _gate_state(front.gate)
+        assert fast.front_end.gate.contested(frame.time_s) == front.gate.contested(frame.time_s)

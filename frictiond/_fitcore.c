@@ -1608,6 +1608,79 @@ out:
 
 /* search_left(times, lo, hi, t) -> int: numpy's `times[lo:hi].searchsorted(t, side="left") + lo`
  * (the first k with times[k] >= t; NaN sorts last), on a float64 array without the slice. */
+/* estimator._top_elasticity: one wheel's least-squares slope of μ on slip over its samples of
+ * [search_left(times, since), end) whose slip lies between their median and 95 % quantile, as
+ * (dμ/dλ)·mean λ / mean μ; None with fewer than min_n samples or min_upper of them in that band. */
+static PyObject *py_top_elasticity(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_slip, *o_mu, *o_wheel, *o_times;
+    Py_ssize_t start, end, min_n, min_upper;
+    double since;
+    int wheel_i;
+    if (!PyArg_ParseTuple(args, "OOOOnndinn:top_elasticity", &o_slip, &o_mu, &o_wheel, &o_times, &start, &end,
+                          &since, &wheel_i, &min_n, &min_upper))
+        return NULL;
+    Buf b[4];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    double *sorted = NULL;
+    if (get_array(o_slip, &b[0], "slip", -1, 0, 0) < 0)
+        goto out;
+    const Py_ssize_t cap = b[0].view.len / 8;
+    if (get_array(o_mu, &b[1], "mu", cap, 0, 0) < 0 || get_array(o_wheel, &b[2], "wheel", cap, 0, 1) < 0
+        || get_array(o_times, &b[3], "times", cap, 0, 0) < 0)
+        goto out;
+    if (start < 0 || end < start || end > cap) {
+        PyErr_SetString(PyExc_ValueError, "top_elasticity: start, end outside the window");
+        goto out;
+    }
+    const double *slip = b[0].view.buf, *mu = b[1].view.buf, *times = b[3].view.buf;
+    const Py_ssize_t *wheel = b[2].view.buf;
+    const Py_ssize_t lo = search_left(times, start, end, since);
+    sorted = PyMem_Malloc(sizeof(double) * (size_t)(end - lo + 1));
+    if (!sorted) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    Py_ssize_t n = 0;
+    for (Py_ssize_t j = lo; j < end; j++)
+        if (wheel[j] == wheel_i)
+            sorted[n++] = slip[j];
+    if (n < min_n || n < 1) {
+        result = Py_NewRef(Py_None);
+        goto out;
+    }
+    sort_values(sorted, n);
+    const double median = quantile_sorted(sorted, n, 0.5), top = quantile_sorted(sorted, n, 0.95);
+    Py_ssize_t m = 0;
+    double sl = 0.0, su = 0.0;
+    for (Py_ssize_t j = lo; j < end; j++)
+        if (wheel[j] == wheel_i && slip[j] >= median && slip[j] <= top) {
+            sl += slip[j];
+            su += mu[j];
+            m++;
+        }
+    if (m < min_upper || !(top - median >= 1e-4)) {
+        result = Py_NewRef(Py_None);
+        goto out;
+    }
+    const double l_mean = sl / m, u_mean = su / m;
+    double sxy = 0.0, sxx = 0.0;
+    for (Py_ssize_t j = lo; j < end; j++)
+        if (wheel[j] == wheel_i && slip[j] >= median && slip[j] <= top) {
+            const double dl = slip[j] - l_mean;
+            sxy += dl * (mu[j] - u_mean);
+            sxx += dl * dl;
+        }
+    const double slope = sxy / (sxx > 1e-12 ? sxx : 1e-12);
+    result = PyFloat_FromDouble(slope * l_mean / (u_mean > 1e-6 ? u_mean : 1e-6));
+out:
+    PyMem_Free(sorted);
+    release_all(b, 4);
+    return result;
+}
+
 static PyObject *py_search_left(PyObject *self, PyObject *args)
 {
     (void)self;
@@ -1680,6 +1753,9 @@ static PyMethodDef methods[] = {
     {"drift_reference", py_drift_reference, METH_VARARGS,
      "drift_reference(history, since, span) -> float | None: the median mu_max of the (time, mu_max) pairs\n"
      "from the first at or after since to span after it; None when one of them is NaN"},
+    {"top_elasticity", py_top_elasticity, METH_VARARGS,
+     "top_elasticity(slip, mu, wheel, times, start, end, since, wheel_i, min_n, min_upper) -> float | None\n\n"
+     "estimator._top_elasticity: one wheel's local elasticity over the top half of its recent slips."},
     {"search_left", py_search_left, METH_VARARGS,
      "search_left(times, lo, hi, t) -> int: times[lo:hi].searchsorted(t, side='left') + lo"},
     {NULL, NULL, 0, NULL},

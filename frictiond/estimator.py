@@ -106,6 +106,9 @@ class LugreTROptions:
     runaway_confirm_s: float = 0.5        # ... and within this long after, its slip running on (the wheel locking)
     runaway_confirm_slip: float = 0.05    # ... by this much and to twice the slip it had reached, or back with its force
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
+    flat_elasticity: float = 0.35         # a wheel at its peak: μ's slope over the top of its slips ≤ this × μ/λ
+    flat_window_s: float = 0.5            # ... over the wheel's samples of the newest this long (a few ABS cycles)
+    flat_min_samples: int = 8             # ... at least this many of them, half in the top half of the slips
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
     excitation_fit_ratio: float = 0.92    # ... or reach this fraction of the fitted μ_max
@@ -235,6 +238,27 @@ def _data_peaks_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, k: in
             out[i] = max(0.0, float(lower[first:first + u // k].max()) * (1.0 - margin))
             first += u // k
     return out
+
+
+def _top_elasticity_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, start: int,
+                          end: int, since: float, wheel_i: int, min_n: int, min_upper: int) -> float | None:
+    """`LugreTrustRegionEstimator._top_elasticity` on the window's columns (the compiled
+    `top_elasticity`'s reference)."""
+    lo = int(times[start:end].searchsorted(since)) + start
+    mine = wheel[lo:end] == wheel_i
+    slips = slip[lo:end][mine]
+    if len(slips) < min_n or len(slips) < 1:
+        return None
+    mus = mu[lo:end][mine]
+    median, top = np.quantile(slips, (0.5, 0.95))
+    upper = (slips >= median) & (slips <= top)
+    if int(upper.sum()) < min_upper or not top - median >= 1e-4:
+        return None
+    ls, us = slips[upper], mus[upper]
+    l_mean, u_mean = float(ls.mean()), float(us.mean())
+    dl = ls - l_mean
+    slope = float(dl @ (us - u_mean)) / max(float(dl @ dl), 1e-12)
+    return slope * l_mean / max(u_mean, 1e-6)
 
 
 def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: list[float], slip_floor: list[float],
@@ -1420,6 +1444,15 @@ class LugreTrustRegionEstimator:
         bent = self._bending(lam_hi, s2, s3, s4, y1, y2)
         if bent is not None:
             return bent, 0.0, True
+        elasticity = self._top_elasticity(wheel)
+        if elasticity is None:
+            return "too few samples at the top slips", 0.0, True
+        if elasticity > o.flat_elasticity:
+            # The quadratic's bend is a shape over all the slips; the test of the peak is local:
+            # at its peak a tyre's μ stops rising with slip. Under an ABS that releases below the
+            # peak (a wheel-deceleration trigger on a soft tyre, a slip target short of a snow
+            # curve's peak) the top slips still show μ rising at 0.4–0.7 of its secant.
+            return ("still rising ({:.2f})", elasticity), 0.0, True
         if mu_hi > o.max_peak_secant * lam_hi:
             # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
             # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
@@ -1473,6 +1506,23 @@ class LugreTrustRegionEstimator:
             slip = slips[i]
             if slip >= max(2.0 * state.reached, state.reached + o.runaway_confirm_slip):
                 state.confirmed = True
+
+    def _top_elasticity(self, wheel: int) -> float | None:
+        """The wheel's local elasticity (dμ/dλ)·λ̄/μ̄ over the top half of its slips of the newest
+        `flat_window_s`: a least-squares slope over the samples between the median slip and the
+        95 % quantile (the single highest are noise and runaway), None without enough of them.
+
+        1 on a linear flank, ≈ 0 at the peak, < 0 past it. At 90 % of the peak the tangent is
+        about a third of the secant: median 0.36 over Magic Formula shapes (B 4–14, C 1.2–2.5,
+        E −1…0.9) and Burckhardt's roads, 0.54 at 80 % (0.27–0.68).
+        """
+        o = self.options
+        w = self._window
+        args = (w.slip, w.mu, w.wheel, w.time, w.start, w.end, self._last_sample_s - o.flat_window_s, wheel,
+                o.flat_min_samples, max(4, o.flat_min_samples // 2))
+        if self.core is not None:
+            return self.core.top_elasticity(*args)
+        return _top_elasticity_numpy(*args)
 
     @staticmethod
     def _bending(lam_hi: float, s2: float, s3: float, s4: float, y1: float, y2: float) -> Any:

@@ -570,3 +570,32 @@ def test_data_peaks_compiled_equals_numpy():
         got = core.data_peaks(slip, mu, wheel, lo, lo + n, k, min_n, margin)
         want = _data_peaks_numpy(slip[lo:lo + n], mu[lo:lo + n], wheel[lo:lo + n], k, min_n, margin)
         assert got == pytest.approx(want, abs=1e-12), (trial, got, want)
+
+
+def test_top_elasticity_compiled_equals_numpy():
+    # Random windows: some wheels with too few samples, slips with ties (a quantile on a tie),
+    # since before, inside and after the window.
+    from frictiond.estimator import _top_elasticity_numpy
+
+    rng = np.random.default_rng(12)
+    defined = 0
+    for trial in range(2000):
+        cap = 256
+        n = int(rng.integers(0, 160))
+        start = int(rng.integers(0, cap - n))
+        slip = np.full(cap, np.nan)
+        mu = np.full(cap, np.nan)
+        wheel = np.full(cap, -1, dtype=np.intp)
+        times = np.full(cap, np.nan)
+        slip[start:start + n] = np.round(rng.random(n) * 0.3, 2 if trial % 2 else 6)
+        mu[start:start + n] = rng.random(n)
+        wheel[start:start + n] = rng.integers(0, 4, n)
+        times[start:start + n] = np.sort(rng.random(n))
+        args = (slip, mu, wheel, times, start, start + n, float(rng.uniform(-0.2, 1.1)), int(rng.integers(0, 4)),
+                int(rng.integers(1, 16)), int(rng.integers(1, 8)))
+        got, want = core.top_elasticity(*args), _top_elasticity_numpy(*args)
+        assert (got is None) == (want is None), (trial, got, want)
+        if want is not None:
+            defined += 1
+            assert got == pytest.approx(want, rel=1e-9, abs=1e-12), (trial, got, want)
+    assert defined > 300   # (the comparison ran on real values, not only on the Nones)

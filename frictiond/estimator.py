@@ -126,6 +126,8 @@ class LugreTROptions:
     jump_threshold: float = 2.5           # change detector: newest mean residual in noise std units
     jump_window_s: float = 0.08
     jump_refractory_s: float = 0.2        # after a detected jump, let the new road fill the window
+    misfit_changes: int = 3               # this many detected changes of road within ...
+    misfit_window_s: float = 4.0          # ... this long: the model misfits the tyre, nothing VALID
     #   (short enough to see the rear axle cross the same change a wheelbase later)
     peak_group_samples: int = 6           # μ_max is never below a wheel's mean μ over this many neighbouring slips
     measured_peak_margin: float = 0.05    # ... less this share (the axles' brake-gain split), ...
@@ -549,6 +551,7 @@ class LugreTrustRegionEstimator:
         self._last_estimate: FrictionEstimate | None = None
         self._fits = 0
         self._jumps = 0
+        self._jump_times: deque[float] = deque()
         self._axle_balance = 0.0
         self._axle_scales_cache: tuple[float, tuple[float, float]] = (math.nan, (1.0, 1.0))
         self._last_sample_s = -math.inf
@@ -600,6 +603,7 @@ class LugreTrustRegionEstimator:
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
+        self._jump_times.clear()
 
     def state(self) -> dict[str, Any]:
         """JSON-serialisable: fitted parameters and the last valid estimate (a prior for a restart)."""
@@ -820,6 +824,7 @@ class LugreTrustRegionEstimator:
             self._radius = None  # let the parameters move freely again
             self._jumps += 1
             self._last_jump_s = now_s
+            self._jump_times.append(now_s)
             # What was valid described the old road: nothing may be held VALID from it.
             self._last_valid = None
             self._last_excited_s = -math.inf
@@ -1120,7 +1125,7 @@ class LugreTrustRegionEstimator:
         last = self._last_estimate
         kept = last is not None and last.status == Status.VALID and self._last_valid is not None
         threshold = o.keep_valid_confidence if kept else o.valid_confidence
-        if excitation > 0 and mu_max < self._stop_floor():
+        if excitation > 0 and (mu_max < self._stop_floor() or self._misfit(now_s)):
             confidence = min(confidence, 0.5 * threshold)
         if excitation > 0 and confidence >= threshold:
             status = Status.VALID
@@ -1179,6 +1184,16 @@ class LugreTrustRegionEstimator:
         o = self.options
         return body_mu * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
 
+    def _misfit(self, now_s: float) -> bool:
+        """Whether `misfit_changes` changes of road were detected within `misfit_window_s`. A real
+        change shows at most twice in a few seconds, once per axle a wheelbase apart; more often,
+        the newest residuals' bias is the static model not describing this tyre (a sharp peak the
+        wheels pass in a few ms, a tyre whose force lags its slip): its μ_max is not VALID."""
+        times = self._jump_times
+        while times and now_s - times[0] > self.options.misfit_window_s:
+            times.popleft()
+        return self.options.misfit_changes > 0 and len(times) >= self.options.misfit_changes
+
     def _stop_floor(self) -> float:
         """The least μ_max the car's highest utilisation since this stop (or road) began allows,
         with the tolerance of a fit that rounds a sharp peak: a fit below it has forgotten the
@@ -1198,7 +1213,7 @@ class LugreTrustRegionEstimator:
         if excitation <= 0.0 or now_s - self._last_fit_s > o.excitation_window_s:
             return dataclasses.replace(last, time_s=now_s)
         confidence = self._confidence(now_s, last.mu_max, last.mu_max_std, excitation)
-        if last.mu_max < self._stop_floor():
+        if last.mu_max < self._stop_floor() or self._misfit(now_s):
             confidence = min(confidence, 0.5 * o.valid_confidence)   # (as `_report` does)
         if confidence < o.valid_confidence:
             return dataclasses.replace(last, time_s=now_s, confidence=confidence)

@@ -458,3 +458,26 @@ def test_a_deceleration_abs_releasing_below_a_soft_peak_gives_no_wrong_valid():
     scores = estimator_scores(estimates, stop.truth)
     assert scores["false_valid"] == 0
     assert scores["valid"] > 0   # (the same stop's wheels near their peak still make it VALID)
+
+
+def test_a_third_change_of_road_within_seconds_ends_valid_until_they_stop():
+    # The road's residual bias flips every 0.7 s (a tyre the static model does not describe is
+    # indistinguishable from this): the first two detections may be a road change and its rear
+    # axle, the third says the model misfits. Nothing VALID while three lie within 4 s; VALID
+    # again once the road has stayed the same that long.
+    a, b = lugre_curve(tm.LugreParams(theta=1.0)), lugre_curve(tm.LugreParams(theta=2.2))
+    flips_until = 2.3
+    est = LugreTrustRegionEstimator()
+    changes, valid_after_third, valid_late = [], [], []
+    for s in braking(lambda t, i: (a if int(t / 0.7) % 2 == 0 or t > flips_until else b), v0=80.0, seed=6,
+                     speed_floor=2.0):
+        jumps = est._jumps
+        e = est.update(s)
+        if est._jumps > jumps:
+            changes.append(s.time_s)
+        if e.status == Status.VALID and len(changes) >= 3:
+            recent = [c for c in changes if s.time_s - c <= est.options.misfit_window_s]
+            (valid_after_third if len(recent) >= 3 else valid_late).append(s.time_s)
+    assert len(changes) >= 3
+    assert valid_after_third == []
+    assert valid_late, "VALID must return once the detections are older than misfit_window_s"

@@ -1003,7 +1003,13 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
                 wl[i] = slowest_ok;
     }
     const double accel_long = a_raw - s.bias;
-    if (!braking && !driving && accel_long < -k[K_UNEXPLAINED_DECEL])
+    /* (decelerating wheels spinning back up after an ABS release explain the car's deceleration) */
+    double spin_up = 0.0;
+    for (int i = 0; i < NW; i++)
+        if (omega_dot[i] > 0.0)
+            spin_up += omega_dot[i];
+    spin_up = k[K_INERTIA] * spin_up / (k[K_RADIUS] * k[K_MASS]);
+    if (!braking && !driving && accel_long + spin_up < -k[K_UNEXPLAINED_DECEL])
         s.unexplained += (s.has_last_sample && s.last_sample != 0.0) ? py_max(0.0, t_c - s.last_sample) : 0.0;
     else
         s.unexplained = 0.0;

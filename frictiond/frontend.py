@@ -817,8 +817,11 @@ class FrontEnd:
         accel_long = accel_long_raw - self._accel_bias_mps2
         # Plausibility of the brake pressures against the body: a hard deceleration with no
         # pressure anywhere (and no drive torque to explain it) means the pressure signals are
-        # wrong, and every brake torque computed from them would be too.
-        if not braking and not driving and accel_long < -opts.unexplained_decel:
+        # wrong, and every brake torque computed from them would be too. Unless the wheels are
+        # spinning back up: an ABS that released every wheel from deep slip at once leaves the
+        # road's force on them, J·ω̇/R each, braking the car for a few tenths of a second.
+        spin_up = veh.wheel_inertia * sum(a for a in omega_dot if a > 0.0) / (veh.wheel_radius * veh.mass)
+        if not braking and not driving and accel_long + spin_up < -opts.unexplained_decel:
             self._unexplained_s += max(0.0, t_c - self._last_sample_time_s) if self._last_sample_time_s else 0.0
         else:
             self._unexplained_s = 0.0

@@ -346,7 +346,9 @@ class InputGate:
             kind = self._choose_source(time_s, message, track, values, kind)
         if kind is None:
             kind = self._values(time_s, track, values)
-            if kind == "rate" and self._follows_new_level(time_s, track, values):
+            # (zeros that go on are what the sensors read, not a marker: four wheels locked
+            # below an ABS's cut-out speed, the car skidding to rest)
+            if kind in ("rate", "marker") and self._follows_new_level(time_s, track, values):
                 kind = None
                 self.reanchored.add(message)
         if math.isfinite(time_s) and time_s > track.arrival_s:

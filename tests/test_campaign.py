@@ -242,3 +242,17 @@ def test_the_reproduce_command_prints_scores_and_replay_commands(tmp_path, capsy
     assert "seed 1000002:" in out and "lugre-tr" in out and "burckhardt-rls" in out
     assert f"frictiond replay {tmp_path / 'd' / 'stop.log'} --config" in out
     assert (tmp_path / "d" / "truth.csv").read_text().startswith("time_s,")
+
+
+@pytest.mark.parametrize("seed", [152, 270])
+def test_normal_abs_stops_give_no_fault(seed):
+    # 152: an ABS releasing all four wheels from deep slip at 40 m/s, no pressure anywhere while
+    # the wheels spin back up and the road's force on them still brakes the car (was "brake
+    # pressure implausible"). 270: below the ABS's cut-out the pedal locks every wheel, the car
+    # skids to rest on wheels reading zero (was "wheel speed implausible": zeros taken for markers).
+    from frictiond.replay import estimates_of
+    from frictiond.samples import Status
+
+    stop = simulate_stop(draw_stop(seed))
+    _pipeline, estimates = estimates_of(stop.config("lugre-tr"), stop.frames)
+    assert not [e.time_s for e in estimates if e.status == Status.FAULT]

@@ -373,3 +373,21 @@ def test_the_fast_path_for_plain_frames_changes_no_verdict(default_config, kind)
         assert fast.process(frame) == reference.process(frame)
         assert _gate_state(fast.front_end.gate) == _gate_state(front.gate)
         assert fast.front_end.gate.contested(frame.time_s) == front.gate.contested(frame.time_s)
+
+
+def test_zeros_that_go_on_are_what_the_sensors_read_not_a_marker():
+    # Below an ABS's cut-out speed the driver's pressure locks all four wheels at once: their
+    # sensors read zero while the car skids on at 2 m/s. One frame of zeros may be a marker;
+    # zeros that go on are the wheels' speeds, and the message is not reported as implausible.
+    gate = InputGate(VEH, {"WHEELS": 0.01})
+    moving = dict(zip(WHEEL_SPEED_NAMES, (6.4, 6.6, 6.3, 6.5)))
+    locked = dict.fromkeys(WHEEL_SPEED_NAMES, 0.0)
+    assert gate.admit(0.00, "WHEELS", moving) is None
+    verdicts = [gate.admit(0.01 * k, "WHEELS", locked) for k in range(1, 10)]
+    assert verdicts[0] == "marker"
+    assert verdicts[-1] is None and verdicts.count("marker") < 5
+    assert gate.faulty_messages() == []
+    # ... while a single frame of zeros between moving ones stays a marker
+    gate = InputGate(VEH, {"WHEELS": 0.01})
+    assert [gate.admit(t, "WHEELS", v) for t, v in ((0.0, moving), (0.01, locked), (0.02, moving))] == \
+        [None, "marker", None]

@@ -1031,6 +1031,18 @@ static int slip_at_order(const void *a, const void *b)
     return (x->at > y->at) - (x->at < y->at);
 }
 
+/* The window's slip, μ and wheel columns into b[0..2] (the same capacity); their capacity, or -1
+ * with an exception. */
+static Py_ssize_t get_slip_mu_wheel(PyObject *o_slip, PyObject *o_mu, PyObject *o_wheel, Buf *b)
+{
+    if (get_array(o_slip, &b[0], "slip", -1, 0, 0) < 0)
+        return -1;
+    const Py_ssize_t cap = b[0].view.len / 8;
+    if (get_array(o_mu, &b[1], "mu", cap, 0, 0) < 0 || get_array(o_wheel, &b[2], "wheel", cap, 0, 1) < 0)
+        return -1;
+    return cap;
+}
+
 static PyObject *py_data_peaks(PyObject *self, PyObject *args)
 {
     (void)self;
@@ -1044,10 +1056,8 @@ static PyObject *py_data_peaks(PyObject *self, PyObject *args)
     memset(b, 0, sizeof b);
     PyObject *result = NULL;
     SlipAt *order = NULL;
-    if (get_array(o_slip, &b[0], "slip", -1, 0, 0) < 0)
-        goto out;
-    const Py_ssize_t cap = b[0].view.len / 8;
-    if (get_array(o_mu, &b[1], "mu", cap, 0, 0) < 0 || get_array(o_wheel, &b[2], "wheel", cap, 0, 1) < 0)
+    const Py_ssize_t cap = get_slip_mu_wheel(o_slip, o_mu, o_wheel, b);
+    if (cap < 0)
         goto out;
     if (lo < 0 || hi < lo || hi > cap || k < 2) {
         PyErr_SetString(PyExc_ValueError, "data_peaks: lo, hi outside the window, or k < 2");
@@ -1625,11 +1635,8 @@ static PyObject *py_top_elasticity(PyObject *self, PyObject *args)
     memset(b, 0, sizeof b);
     PyObject *result = NULL;
     double *sorted = NULL;
-    if (get_array(o_slip, &b[0], "slip", -1, 0, 0) < 0)
-        goto out;
-    const Py_ssize_t cap = b[0].view.len / 8;
-    if (get_array(o_mu, &b[1], "mu", cap, 0, 0) < 0 || get_array(o_wheel, &b[2], "wheel", cap, 0, 1) < 0
-        || get_array(o_times, &b[3], "times", cap, 0, 0) < 0)
+    const Py_ssize_t cap = get_slip_mu_wheel(o_slip, o_mu, o_wheel, b);
+    if (cap < 0 || get_array(o_times, &b[3], "times", cap, 0, 0) < 0)
         goto out;
     if (start < 0 || end < start || end > cap) {
         PyErr_SetString(PyExc_ValueError, "top_elasticity: start, end outside the window");

@@ -548,6 +548,20 @@ def test_drift_reference_is_the_confidence_loop():
         core.drift_reference([(0.0, 0.5, 1.0)], 0.0, 1.0)
 
 
+def _random_window(rng, cap: int, n_max: int, decimals: int, wheels: int = 4):
+    """Window columns (slip, μ, wheel) of capacity `cap` with n < `n_max` random samples from
+    `lo` on (NaN and −1 around them), slips rounded to `decimals` so that ties occur: (lo, n, ...)."""
+    n = int(rng.integers(0, n_max))
+    lo = int(rng.integers(0, cap - n))
+    slip = np.full(cap, np.nan)
+    mu = np.full(cap, np.nan)
+    wheel = np.full(cap, -1, dtype=np.intp)
+    slip[lo:lo + n] = np.round(rng.random(n) * 0.3, decimals)
+    mu[lo:lo + n] = rng.random(n)
+    wheel[lo:lo + n] = rng.integers(0, wheels, n)
+    return lo, n, slip, mu, wheel
+
+
 def test_data_peaks_compiled_equals_numpy():
     # Random windows, slips rounded so that ties occur (numpy's stable order must be kept), some
     # wheels with too few samples, margins and group sizes as configured and beyond.
@@ -555,15 +569,7 @@ def test_data_peaks_compiled_equals_numpy():
 
     rng = np.random.default_rng(11)
     for trial in range(300):
-        cap = 512
-        n = int(rng.integers(0, 300))
-        lo = int(rng.integers(0, cap - n))
-        slip = np.full(cap, np.nan)
-        mu = np.full(cap, np.nan)
-        wheel = np.full(cap, -1, dtype=np.intp)
-        slip[lo:lo + n] = np.round(rng.random(n) * 0.3, 2)
-        mu[lo:lo + n] = rng.random(n)
-        wheel[lo:lo + n] = rng.integers(0, 4 if trial % 3 else 2, n)
+        lo, n, slip, mu, wheel = _random_window(rng, 512, 300, 2, 4 if trial % 3 else 2)
         k = int(rng.integers(2, 9))
         min_n = int(rng.integers(0, 40))
         margin = float(rng.choice([0.0, 0.05, 0.2]))
@@ -580,16 +586,8 @@ def test_top_elasticity_compiled_equals_numpy():
     rng = np.random.default_rng(12)
     defined = 0
     for trial in range(2000):
-        cap = 256
-        n = int(rng.integers(0, 160))
-        start = int(rng.integers(0, cap - n))
-        slip = np.full(cap, np.nan)
-        mu = np.full(cap, np.nan)
-        wheel = np.full(cap, -1, dtype=np.intp)
-        times = np.full(cap, np.nan)
-        slip[start:start + n] = np.round(rng.random(n) * 0.3, 2 if trial % 2 else 6)
-        mu[start:start + n] = rng.random(n)
-        wheel[start:start + n] = rng.integers(0, 4, n)
+        start, n, slip, mu, wheel = _random_window(rng, 256, 160, 2 if trial % 2 else 6)
+        times = np.full(256, np.nan)
         times[start:start + n] = np.sort(rng.random(n))
         args = (slip, mu, wheel, times, start, start + n, float(rng.uniform(-0.2, 1.1)), int(rng.integers(0, 4)),
                 int(rng.integers(1, 16)), int(rng.integers(1, 8)))

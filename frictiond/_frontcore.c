@@ -1003,7 +1003,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
                 wl[i] = slowest_ok;
     }
     const double accel_long = a_raw - s.bias;
-    /* (decelerating wheels spinning back up after an ABS release explain the car's deceleration) */
+    /* (wheels spinning back up after an ABS release explain the car's deceleration) */
     double spin_up = 0.0;
     for (int i = 0; i < NW; i++)
         if (omega_dot[i] > 0.0)

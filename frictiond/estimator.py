@@ -104,7 +104,7 @@ class LugreTROptions:
     excitation_runaway_elasticity: float = 0.3   # ... while μ grows by at most this share of the slip's relative growth
     excitation_runaway_decel: float = 1.5        # ... and the wheel decelerating faster than the car by this × μ·g
     runaway_confirm_s: float = 0.5        # ... and within this long after, its slip running on (the wheel locking)
-    runaway_confirm_slip: float = 0.05    # ... by this much and to twice the slip it had reached, or back with its force
+    runaway_confirm_slip: float = 0.05    # ... by this much and to twice the slip it had reached
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     flat_elasticity: float = 0.35         # a wheel at its peak: μ's slope over the top of its slips ≤ this × μ/λ
     flat_window_s: float = 0.5            # ... over the wheel's samples of the newest this long (a few ABS cycles)
@@ -126,9 +126,9 @@ class LugreTROptions:
     jump_threshold: float = 2.5           # change detector: newest mean residual in noise std units
     jump_window_s: float = 0.08
     jump_refractory_s: float = 0.2        # after a detected jump, let the new road fill the window
+    #   (short enough to see the rear axle cross the same change a wheelbase later)
     misfit_changes: int = 3               # this many detected changes of road within ...
     misfit_window_s: float = 4.0          # ... this long: the model misfits the tyre, nothing VALID
-    #   (short enough to see the rear axle cross the same change a wheelbase later)
     peak_group_samples: int = 6           # μ_max is never below a wheel's mean μ over this many neighbouring slips
     measured_peak_margin: float = 0.05    # ... less this share (the axles' brake-gain split), ...
     measured_peak_settle_s: float = 0.5   # ... from this long into a stop (the brake gain corrected)
@@ -1125,7 +1125,7 @@ class LugreTrustRegionEstimator:
         last = self._last_estimate
         kept = last is not None and last.status == Status.VALID and self._last_valid is not None
         threshold = o.keep_valid_confidence if kept else o.valid_confidence
-        if excitation > 0 and (mu_max < self._stop_floor() or self._misfit(now_s)):
+        if excitation > 0 and self._barred_from_valid(now_s, mu_max):
             confidence = min(confidence, 0.5 * threshold)
         if excitation > 0 and confidence >= threshold:
             status = Status.VALID
@@ -1184,6 +1184,11 @@ class LugreTrustRegionEstimator:
         o = self.options
         return body_mu * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
 
+    def _barred_from_valid(self, now_s: float, mu_max: float) -> bool:
+        """Whether μ_max may not be VALID whatever its confidence: below the stop's floor, or
+        from a model that misfits the tyre (`_misfit`)."""
+        return mu_max < self._stop_floor() or self._misfit(now_s)
+
     def _misfit(self, now_s: float) -> bool:
         """Whether `misfit_changes` changes of road were detected within `misfit_window_s`. A real
         change shows at most twice in a few seconds, once per axle a wheelbase apart; more often,
@@ -1213,7 +1218,7 @@ class LugreTrustRegionEstimator:
         if excitation <= 0.0 or now_s - self._last_fit_s > o.excitation_window_s:
             return dataclasses.replace(last, time_s=now_s)
         confidence = self._confidence(now_s, last.mu_max, last.mu_max_std, excitation)
-        if last.mu_max < self._stop_floor() or self._misfit(now_s):
+        if self._barred_from_valid(now_s, last.mu_max):
             confidence = min(confidence, 0.5 * o.valid_confidence)   # (as `_report` does)
         if confidence < o.valid_confidence:
             return dataclasses.replace(last, time_s=now_s, confidence=confidence)

@@ -381,9 +381,9 @@ class InputGate:
         return kind
 
     def _follows_new_level(self, time_s: float, track: _Track, values: Mapping[str, float]) -> bool:
-        """A value rejected for its rate: whether enough rejected frames in a row agree with each
-        other to say the last accepted one was wrong, or the sensor came back from a dead spell
-        (followed; the front end restarts its filter)."""
+        """A frame rejected for its rate or as a marker: whether enough rejected frames in a row
+        agree with each other to say the last accepted one was wrong, the sensor came back from a
+        dead spell, or its zeros are what it reads (followed; the front end restarts its filter)."""
         agrees = self._agrees(time_s, values, track.rejected)
         track.rejected = (time_s, dict(values))
         track.agreeing = track.agreeing + 1 if agrees else 0

@@ -106,6 +106,11 @@ class LugreTROptions:
     runaway_confirm_s: float = 0.5        # ... and within this long after, its slip running on (the wheel locking)
     runaway_confirm_slip: float = 0.05    # ... by this much and to twice the slip it had reached
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
+    min_slip_spread: float = 0.3          # a wheel's recent slips (10–90 % quantiles) span this share of the highest
+    abs_min_slip_spread: float = 0.15     # ... or this share with an ABS working the wheel (its cycles hold the rest)
+    wheel_evidence_hold_s: float = 1.0    # a wheel has shown its peak if a verdict said so within this long
+    unshown_wheel_tolerance: float = 0.1  # VALID: μ_max moves less than this share if the wheels that have not
+    #   shown their peak took the others' (split μ: their extrapolated peaks are not evidence)
     flat_elasticity: float = 0.35         # a wheel at its peak: μ's slope over the top of its slips ≤ this × μ/λ
     flat_window_s: float = 0.5            # ... over the wheel's samples of the newest this long (a few ABS cycles)
     flat_min_samples: int = 8             # ... at least this many of them, half in the top half of the slips
@@ -570,6 +575,7 @@ class LugreTrustRegionEstimator:
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
         self._abs_seen_s = [-math.inf] * N_WHEELS
+        self._wheel_shown_s = [-math.inf] * N_WHEELS
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
@@ -600,6 +606,7 @@ class LugreTrustRegionEstimator:
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
+        self._wheel_shown_s = [-math.inf] * N_WHEELS
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
@@ -832,6 +839,7 @@ class LugreTrustRegionEstimator:
             self._mu_history.clear()
             self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
             self._measured_peaks = [0.0] * N_WHEELS
+            self._wheel_shown_s = [-math.inf] * N_WHEELS   # (the peaks they showed were the old road's)
             # (`_peak_seen_speed` stays: the stop is still in ABS, only on another road; a wheel held
             # past the new fit's peak is evidence of it as much as of the old one's.)
 
@@ -1125,7 +1133,7 @@ class LugreTrustRegionEstimator:
         last = self._last_estimate
         kept = last is not None and last.status == Status.VALID and self._last_valid is not None
         threshold = o.keep_valid_confidence if kept else o.valid_confidence
-        if excitation > 0 and self._barred_from_valid(now_s, mu_max):
+        if excitation > 0 and self._barred_from_valid(now_s, mu_max, wheel_mu):
             confidence = min(confidence, 0.5 * threshold)
         if excitation > 0 and confidence >= threshold:
             status = Status.VALID
@@ -1184,10 +1192,34 @@ class LugreTrustRegionEstimator:
         o = self.options
         return body_mu * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
 
-    def _barred_from_valid(self, now_s: float, mu_max: float) -> bool:
-        """Whether μ_max may not be VALID whatever its confidence: below the stop's floor, or
-        from a model that misfits the tyre (`_misfit`)."""
-        return mu_max < self._stop_floor() or self._misfit(now_s)
+    def _barred_from_valid(self, now_s: float, mu_max: float, wheel_mu: Sequence[float]) -> bool:
+        """Whether μ_max may not be VALID whatever its confidence: below the stop's floor, from a
+        model that misfits the tyre (`_misfit`), or leaning on wheels that have not shown their
+        peak (`_leans_on_unshown_wheels`)."""
+        return (mu_max < self._stop_floor() or self._misfit(now_s)
+                or self._leans_on_unshown_wheels(now_s, wheel_mu))
+
+    def _leans_on_unshown_wheels(self, now_s: float, wheel_mu: Sequence[float]) -> bool:
+        """Whether μ_max depends on the peaks of wheels whose data have not shown them lately.
+
+        μ_max is the load-weighted mean of the four wheels' peaks; excitation needs only one
+        wheel at its peak. On one road the others' fits follow it (they share the road), but on
+        split μ a wheel on the grippy side, its slip held far below its peak (a slip target
+        short of a cobblestone's peak at 0.4), contributes an extrapolation: VALID with a mean
+        as wrong as that. So μ_max is compared with the mean the shown wheels' peaks alone give.
+        """
+        o = self.options
+        hold = o.wheel_evidence_hold_s
+        shown = [now_s - t <= hold for t in self._wheel_shown_s]
+        if all(shown) or not any(shown):
+            return False
+        share = self._load_share
+        shown_weight = sum(w for w, s in zip(share, shown) if s)
+        reference = sum(w * m for w, m, s in zip(share, wheel_mu, shown) if s) / max(shown_weight, 1e-9)
+        total = max(sum(share), 1e-9)
+        published = sum(w * m for w, m in zip(share, wheel_mu)) / total
+        if_shown = sum(w * (m if s else reference) for w, m, s in zip(share, wheel_mu, shown)) / total
+        return abs(published - if_shown) > o.unshown_wheel_tolerance * max(if_shown, 1e-6)
 
     def _misfit(self, now_s: float) -> bool:
         """Whether `misfit_changes` changes of road were detected within `misfit_window_s`. A real
@@ -1218,7 +1250,7 @@ class LugreTrustRegionEstimator:
         if excitation <= 0.0 or now_s - self._last_fit_s > o.excitation_window_s:
             return dataclasses.replace(last, time_s=now_s)
         confidence = self._confidence(now_s, last.mu_max, last.mu_max_std, excitation)
-        if self._barred_from_valid(now_s, last.mu_max):
+        if self._barred_from_valid(now_s, last.mu_max, last.wheel_mu_max):
             confidence = min(confidence, 0.5 * o.valid_confidence)   # (as `_report` does)
         if confidence < o.valid_confidence:
             return dataclasses.replace(last, time_s=now_s, confidence=confidence)
@@ -1407,6 +1439,8 @@ class LugreTrustRegionEstimator:
                 i, wheel_stats[i], float(wheel_mu[i]), float(wheel_lam[i]), float(fit_at_hi[i]),
                 bool(self._capped is not None and self._capped[i]), speed, peak_seen, abs_working)
             best = max(best, proximity)
+            if proximity >= o.excitation_slip_ratio:
+                self._wheel_shown_s[i] = self._last_sample_s
             if fresh:
                 best_fresh = max(best_fresh, proximity)
         if best < o.excitation_slip_ratio:
@@ -1449,8 +1483,13 @@ class LugreTrustRegionEstimator:
             # wheel-speed signals (0.01–0.06 km/h each) and the speed estimate's error make
             # several % of slip. A sliding speed that small is not measured, whatever the ratio.
             return "sliding too slow", 0.0, True
-        spread = lam_hi >= o.excitation_min_slip and (lam_hi - lam_lo) >= 0.3 * lam_hi
-        if not spread and not abs_working:
+        # An ABS working the wheel is evidence of the limit by itself (`_held_near_the_peak`), but
+        # the shape tests below still read the curve from the spread of the slips: a slip
+        # controller holding its target to ±1 % leaves them nothing but noise, and one of its
+        # verdicts passing at random would claim a peak that may lie at twice that slip.
+        needed_spread = o.abs_min_slip_spread if abs_working else o.min_slip_spread
+        spread = lam_hi >= o.excitation_min_slip and (lam_hi - lam_lo) >= needed_spread * lam_hi
+        if not spread:
             # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
             # ice): the shape of the curve near its peak is not observed ...
             if peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star:

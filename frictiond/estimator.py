@@ -53,6 +53,8 @@ from .vehicle import GRAVITY_MPS2, VehicleParams
 
 SHARED = ("sigma0", "v_s", "sigma2")
 N_WHEELS = 4
+# A wheel verdict's proximity when the wheel's data contradict the fitted curve (`_wheel_verdict`).
+CONTRADICTED = -1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +114,8 @@ class LugreTROptions:
     unshown_wheel_tolerance: float = 0.1  # VALID: μ_max moves less than this share if the wheels that have not
     #   shown their peak took the others' (split μ: their extrapolated peaks are not evidence)
     flat_elasticity: float = 0.35         # a wheel at its peak: μ's slope over the top of its slips ≤ this × μ/λ
+    contradiction_elasticity: float = 0.7     # μ rising at this share of μ/λ ...
+    contradiction_slip_ratio: float = 1.2     # ... at slips this far past the fitted peak: the fit is not this tyre
     flat_window_s: float = 0.5            # ... over the wheel's samples of the newest this long (a few ABS cycles)
     flat_min_samples: int = 8             # ... at least this many of them, half in the top half of the slips
     excitation_every: int = 3             # updates between excitation evaluations
@@ -1414,6 +1418,8 @@ class LugreTrustRegionEstimator:
             peak).
         Once shown, a wheel held past the fitted peak at its grip stays excited (ABS holding
         an ice plateau at nearly constant slip, where the bending has no spread to work on).
+        No excitation at all while one wheel's data contradict the fitted curve (μ still rising
+        at slips well past that wheel's fitted peak).
         """
         o = self.options
         # Only the newest ABS cycles count: after a change of road the older samples describe
@@ -1429,6 +1435,7 @@ class LugreTrustRegionEstimator:
         at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
                     zip(self._floats_of_x()[0][:N_WHEELS], self._theta_bounds)]
         best = best_fresh = 0.0
+        contradicted = False
         why = self._excitation_why = ["", "", "", ""]
         for i in range(N_WHEELS):
             if at_bound[i]:
@@ -1438,6 +1445,7 @@ class LugreTrustRegionEstimator:
             why[i], proximity, fresh = self._wheel_verdict(
                 i, wheel_stats[i], float(wheel_mu[i]), float(wheel_lam[i]), float(fit_at_hi[i]),
                 bool(self._capped is not None and self._capped[i]), speed, peak_seen, abs_working)
+            contradicted = contradicted or proximity == CONTRADICTED
             best = max(best, proximity)
             if proximity >= o.excitation_slip_ratio:
                 self._wheel_shown_s[i] = self._last_sample_s
@@ -1447,6 +1455,8 @@ class LugreTrustRegionEstimator:
             return 0.0
         if best_fresh >= o.excitation_slip_ratio:
             self._peak_seen_speed = speed
+        if contradicted:
+            return 0.0
         return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
 
     def _wheel_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float, fit_at_hi: float,
@@ -1507,6 +1517,12 @@ class LugreTrustRegionEstimator:
         if elasticity is None:
             return "too few samples at the top slips", 0.0, True
         if elasticity > o.flat_elasticity:
+            if elasticity > o.contradiction_elasticity and lam_hi > o.contradiction_slip_ratio * lam_star:
+                # μ still rising clearly (twice the flat threshold) at slips well past where the
+                # fit puts this wheel's peak: the fitted curve is not the tyre's, and no wheel's
+                # proximity to its peak can be read from it (a relaxing tyre's loops, a fit whose
+                # peak moved onto the data of another wheel).
+                return ("rising past the fitted peak ({:.2f})", elasticity), CONTRADICTED, True
             # The quadratic's bend is a shape over all the slips; the test of the peak is local:
             # at its peak a tyre's μ stops rising with slip. Under an ABS that releases below the
             # peak (a wheel-deceleration trigger on a soft tyre, a slip target short of a snow

@@ -9,7 +9,7 @@ import pytest
 
 from frictiond import tyre_model as tm
 from frictiond.baseline_rls import BurckhardtRLSEstimator, burckhardt_peak
-from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
+from frictiond.estimator import CONTRADICTED, LugreTROptions, LugreTrustRegionEstimator
 from frictiond.samples import FrictionEstimate, PhysicalSample, Status
 
 
@@ -520,3 +520,31 @@ def test_a_slip_controller_holding_its_target_below_a_far_peak_gives_no_valid():
     stop = simulate_stop(draw_stop(581))
     _pipeline, estimates = estimates_of(stop.config("lugre-tr"), stop.frames)
     assert estimator_scores(estimates, stop.truth)["valid"] == 0
+
+
+@pytest.mark.parametrize("elasticity, fitted_peak_slip, contradicted", [
+    (0.9, 0.10, True),    # μ rising at 0.9 of μ/λ at λ 0.2, twice past the fitted peak
+    (0.5, 0.10, False),   # rising, but not clearly enough to contradict the fit
+    (0.9, 0.25, False),   # rising below the fitted peak: the tyre is simply not there yet
+])
+def test_mu_rising_well_past_the_fitted_peak_contradicts_the_fit(elasticity, fitted_peak_slip, contradicted):
+    est = LugreTrustRegionEstimator()
+    est._top_elasticity = lambda wheel: elasticity
+    est._bending = lambda *a: None     # (the data bend over: the verdict reaches the top-of-slips test)
+    stats = (50.0, 0.05, 0.2, 0.05, 0.2, 0.5, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0)
+    why, proximity, _fresh = est._wheel_verdict(0, stats, 0.55, fitted_peak_slip, 0.5, False, 20.0, False, True)
+    assert (proximity == CONTRADICTED) == contradicted
+    assert proximity <= 0.0    # (either way this wheel shows no peak)
+
+
+def test_one_wheel_contradicting_the_fit_leaves_no_excitation(monkeypatch):
+    # Wheel 0 sits at its fitted peak; wheel 1's μ still rises well past its own: the fitted
+    # curve is not the tyre's, so wheel 0's proximity to "its peak" proves nothing either.
+    est = LugreTrustRegionEstimator()
+    monkeypatch.setattr(est, "_wheel_stats", lambda weights: ((0.0,) * 12,) * 4)
+    monkeypatch.setattr(est, "_fit_at_high_slip", lambda speed: np.zeros(4))
+    for second in (0.0, CONTRADICTED):
+        verdicts = {0: ("proximity", 1.0, True), 1: ("", second, True)}
+        monkeypatch.setattr(est, "_wheel_verdict", lambda i, *a: verdicts.get(i, ("", 0.0, True)))
+        excitation = est._excitation(None, np.full(4, 0.5), np.full(4, 0.1), 20.0)
+        assert (excitation == 0.0) == (second == CONTRADICTED)

@@ -114,10 +114,10 @@ class LugreTROptions:
     unshown_wheel_tolerance: float = 0.1  # VALID: μ_max moves less than this share if the wheels that have not
     #   shown their peak took the others' (split μ: their extrapolated peaks are not evidence)
     flat_elasticity: float = 0.35         # a wheel at its peak: μ's slope over the top of its slips ≤ this × μ/λ
-    contradiction_elasticity: float = 0.7     # μ rising at this share of μ/λ ...
-    contradiction_slip_ratio: float = 1.2     # ... at slips this far past the fitted peak: the fit is not this tyre
     flat_window_s: float = 0.5            # ... over the wheel's samples of the newest this long (a few ABS cycles)
     flat_min_samples: int = 8             # ... at least this many of them, half in the top half of the slips
+    contradiction_elasticity: float = 0.7     # μ still rising at this share of μ/λ ...
+    contradiction_slip_ratio: float = 1.2     # ... at slips this far past the fitted peak: the fit is not this tyre
     excitation_every: int = 3             # updates between excitation evaluations
     excitation_window_s: float = 0.3      # the newest samples that must show the peak
     excitation_fit_ratio: float = 0.92    # ... or reach this fraction of the fitted μ_max
@@ -1493,10 +1493,11 @@ class LugreTrustRegionEstimator:
             # wheel-speed signals (0.01–0.06 km/h each) and the speed estimate's error make
             # several % of slip. A sliding speed that small is not measured, whatever the ratio.
             return "sliding too slow", 0.0, True
-        # An ABS working the wheel is evidence of the limit by itself (`_held_near_the_peak`), but
-        # the shape tests below still read the curve from the spread of the slips: a slip
-        # controller holding its target to ±1 % leaves them nothing but noise, and one of its
-        # verdicts passing at random would claim a peak that may lie at twice that slip.
+        # An ABS working the wheel is evidence of the limit by itself (it releases the pressure
+        # the driver still demands), but the shape tests below still read the curve from the
+        # spread of the slips: a slip controller holding its target to ±1 % leaves them nothing
+        # but noise, and one of its verdicts passing at random would claim a peak that may lie
+        # at twice that slip.
         needed_spread = o.abs_min_slip_spread if abs_working else o.min_slip_spread
         spread = lam_hi >= o.excitation_min_slip and (lam_hi - lam_lo) >= needed_spread * lam_hi
         if not spread:

@@ -1616,8 +1616,6 @@ out:
     return result;
 }
 
-/* search_left(times, lo, hi, t) -> int: numpy's `times[lo:hi].searchsorted(t, side="left") + lo`
- * (the first k with times[k] >= t; NaN sorts last), on a float64 array without the slice. */
 /* estimator._top_elasticity: one wheel's least-squares slope of μ on slip over its samples of
  * [search_left(times, since), end) whose slip lies between their median and 95 % quantile, as
  * (dμ/dλ)·mean λ / mean μ; None with fewer than min_n samples or min_upper of them in that band. */
@@ -1688,6 +1686,8 @@ out:
     return result;
 }
 
+/* search_left(times, lo, hi, t) -> int: numpy's `times[lo:hi].searchsorted(t, side="left") + lo`
+ * (the first k with times[k] >= t; NaN sorts last), on a float64 array without the slice. */
 static PyObject *py_search_left(PyObject *self, PyObject *args)
 {
     (void)self;

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from statistics import NormalDist
 from typing import Any, Sequence
 
 from .samples import WHEELS, Status
@@ -33,7 +34,7 @@ STATUS_COLOURS = {
     Status.FAULT: "#fc9272",
 }
 WHEEL_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728")
-CONFIDENCE_TOLERANCE = 0.06   # LugreTROptions.confidence_tolerance's default: relative σ at confidence e^(−½)
+CONFIDENCE_BAND = 0.10   # LugreTROptions.confidence_band's default: the confidence is P(error within this share)
 
 
 def plotting_available() -> bool:
@@ -89,17 +90,17 @@ def _finite(x: float) -> bool:
     return x is not None and math.isfinite(x)
 
 
-def _band_halfwidth(estimate: Any, tolerance: float) -> float:
-    """2σ of μ_max: from the covariance when known, else from the confidence (c = exp(−½(σ_rel/tol)²))."""
+def _band_halfwidth(estimate: Any, band: float) -> float:
+    """2σ of μ_max: from the covariance when known, else from the confidence (the probability of
+    a Gaussian error within `band` of μ_max: c = erf(band / (σ_rel √2)))."""
     std = getattr(estimate, "mu_max_std", math.inf)
     if _finite(std):
         return 2.0 * std
     c = estimate.confidence
     if not _finite(c) or c <= 0.0 or not _finite(estimate.mu_max):
         return math.nan
-    c = min(c, 1.0)
-    rel = tolerance * math.sqrt(max(0.0, -2.0 * math.log(c)))
-    return 2.0 * rel * abs(estimate.mu_max)
+    z = NormalDist().inv_cdf(0.5 + 0.5 * min(c, 1.0 - 1e-9))
+    return 2.0 * band / z * abs(estimate.mu_max)
 
 
 def _status_runs(times: Sequence[float], statuses: Sequence[Status]) -> list[tuple[float, float, Status]]:
@@ -172,9 +173,9 @@ def plot_replay(
     t_first = times[0] if times else (samples[0].time_s if samples else None)
     t_last = times[-1] if times else (samples[-1].time_s if samples else None)
     final = estimates[-1] if estimates else None
-    tolerance = getattr(getattr(estimator, "options", None), "confidence_tolerance", CONFIDENCE_TOLERANCE)
-    if not _finite(tolerance) or tolerance <= 0:
-        tolerance = CONFIDENCE_TOLERANCE
+    band = getattr(getattr(estimator, "options", None), "confidence_band", CONFIDENCE_BAND)
+    if not _finite(band) or band <= 0:
+        band = CONFIDENCE_BAND
     truth, offset, shifted = _truth(truth_path, t_first, t_last)
 
     # -- MuMax over time ----------------------------------------------------------------------
@@ -185,7 +186,7 @@ def plot_replay(
             seen_status.append(status)
     nan = math.nan
     mu = [e.mu_max if _finite(e.mu_max) and e.status not in (Status.INIT,) else nan for e in estimates]
-    half = [_band_halfwidth(e, tolerance) if _finite(m) else nan for e, m in zip(estimates, mu)]
+    half = [_band_halfwidth(e, band) if _finite(m) else nan for e, m in zip(estimates, mu)]
     lo = [m - h if _finite(h) else nan for m, h in zip(mu, half)]
     hi = [m + h if _finite(h) else nan for m, h in zip(mu, half)]
     handles = []

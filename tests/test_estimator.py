@@ -119,7 +119,9 @@ def test_reconverges_after_a_mu_jump():
 
 def test_a_change_of_road_crossing_the_wheelbase_is_followed_to_the_rear_axle():
     """The front axle reaches ice 0.12 s before the rear (a wheelbase at ~20 m/s): two jumps, the
-    second within the first's refractory time if that were longer than the crossing."""
+    second within the first's refractory time if that were longer than the crossing, and the fit
+    on the ice soon after. (Whether it is VALID then is the confidence's matter: 0.02 of noise
+    on a μ of 0.05, from half a second of samples, leaves it short of even odds within 10 %.)"""
     dry, ice = lugre_curve(tm.LugreParams(theta=1.0)), lugre_curve(tm.LugreParams(theta=25.0))
     front_t, rear_t = 1.5, 1.62
     truth = tm.peak(10.0, tm.LugreParams(theta=25.0))[0]
@@ -127,7 +129,7 @@ def test_a_change_of_road_crossing_the_wheelbase_is_followed_to_the_rear_axle():
     first_right = None
     for s in braking(lambda t, i: ice if t >= (rear_t if i >= 2 else front_t) else dry, v0=25.0, seed=3):
         e = est.update(s)
-        if first_right is None and s.time_s > rear_t and e.status == Status.VALID and abs(e.mu_max - truth) < 0.1 * truth:
+        if first_right is None and s.time_s > rear_t and abs(e.mu_max - truth) < 0.1 * truth:
             first_right = s.time_s - rear_t
     assert est._jumps == 2
     assert first_right is not None and first_right < 0.45   # 0.56 s with a 0.3 s refractory time
@@ -348,7 +350,7 @@ def test_a_one_cycle_dip_of_the_fit_is_not_counted_again_a_drift_window_later():
         mu = 0.094 if t == dip_t else 0.1
         confidence[t] = est._confidence(t, mu, 0.001, 1.0)
     settled = confidence[0.79]
-    assert confidence[dip_t] < 0.7 * settled            # the dip itself is not trusted
+    assert confidence[dip_t] < 0.9 * settled            # the dip itself costs confidence
     later = round(dip_t + o.drift_window_s, 2)
     assert min(confidence[round(later + d, 2)] for d in (-0.02, -0.01, 0.0, 0.01, 0.02)) > 0.95 * settled
 
@@ -548,3 +550,22 @@ def test_one_wheel_contradicting_the_fit_leaves_no_excitation(monkeypatch):
         monkeypatch.setattr(est, "_wheel_verdict", lambda i, *a: verdicts.get(i, ("", 0.0, True)))
         excitation = est._excitation(None, np.full(4, 0.5), np.full(4, 0.1), 20.0)
         assert (excitation == 0.0) == (second == CONTRADICTED)
+
+
+def test_the_confidence_counts_one_piece_of_evidence_per_abs_cycle():
+    """The confidence is the probability of μ_max within 10 % of the road's. A delta-method spread
+    of 2 % from samples 10 ms apart is 35 samples per ABS cycle that repeat one misfit: on the
+    randomised campaign such outputs were within 10 % of the truth about 55 % of the time. The
+    same spread from samples 20 ms apart rests on twice the cycles."""
+    confidences = {}
+    for period in (0.01, 0.02):
+        est = LugreTrustRegionEstimator(sample_period_s=period)
+        est._excited_since_s = 0.0
+        for k in range(40):
+            confidences[period] = est._confidence(0.01 * k, 0.5, 0.01, 1.0)
+    assert 0.45 < confidences[0.01] < 0.6
+    assert confidences[0.02] > confidences[0.01] + 0.05
+    best = LugreTrustRegionEstimator()
+    best._excited_since_s = 0.0
+    settled = [best._confidence(0.01 * k, 0.5, 0.0, 1.0) for k in range(40)][-1]
+    assert 0.85 < settled < 0.95   # the model-mismatch floor: the best are within 10 % nine times in ten

@@ -164,12 +164,13 @@ def test_compiled_solve_to_tolerance_finds_the_numpy_solution(theta):
 
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
-@pytest.mark.parametrize("theta, seed", [(1.0, 1), (2.5, 3), (25.0, 5)])
-def test_the_estimator_says_the_same_on_both_paths(theta, seed, monkeypatch):
+@pytest.mark.parametrize("theta, seed, noise", [(1.0, 1, 0.02), (2.5, 3, 0.02), (25.0, 5, 0.005)])
+def test_the_estimator_says_the_same_on_both_paths(theta, seed, noise, monkeypatch):
     # Everything compiled against an install without a compiler (fit, peaks, partials in Python).
+    # (On ice, μ ≈ 0.05, the noise of dry asphalt would leave nothing VALID to compare.)
     p = tm.LugreParams(theta=theta, sigma0=230.0, v_s=5.0, sigma2=0.002)
     curve = lugre_curve(p)
-    samples = list(braking(lambda t, i: curve, seed=seed))
+    samples = list(braking(lambda t, i: curve, seed=seed, noise=noise))
     compiled = LugreTrustRegionEstimator()
     compiled_estimates = [compiled.update(s) for s in samples]
     monkeypatch.setattr(tm, "_compiled", None)

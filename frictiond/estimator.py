@@ -124,8 +124,9 @@ class LugreTROptions:
     peak_extrapolation: float = 1.6       # μ_max is not read beyond this multiple of the slips seen
     extrapolation_max_slip: float = 0.3   # ... nor beyond this slip where the slips seen did not go
     min_utilisation: float = 0.8          # measured μ (90 % quantile) must reach this share of μ_max
-    valid_confidence: float = 0.5         # VALID: μ_max more likely than not within `confidence_band`
-    keep_valid_confidence: float = 0.45   # a VALID estimate stays VALID down to this (no one-cycle flicker)
+    valid_confidence: float = 0.55        # VALID is entered here ...
+    keep_valid_confidence: float = 0.5    # ... and kept down to this (no one-cycle flicker): every VALID output
+    #   is more likely than not within `confidence_band`
     confidence_band: float = 0.10         # the confidence is the probability of μ_max within this share of the road's
     evidence_interval_s: float = 0.35     # the data tell about the peak once per this long (an ABS cycle), not
     #   once per sample: μ_max's spread grows by √(this / the sample period)

@@ -1333,7 +1333,8 @@ class LugreTrustRegionEstimator:
         # Newest residuals biased beyond the noise: the road may be changing under the fit.
         excess = max(0.0, self._innovation_score - o.jump_threshold)
         innovation = math.exp(-excess * excess / 8.0)
-        within_band = math.erf(o.confidence_band / math.sqrt(2.0 * spread2))
+        # (σ is 0 only with `model_mismatch` configured to 0 and a fit without spread or drift)
+        within_band = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
         confidence = excitation * ramp * innovation * within_band
         confidence *= input_quality.confidence_factor(self._input_share)
         return confidence if math.isfinite(confidence) else 0.0

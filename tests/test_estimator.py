@@ -583,3 +583,10 @@ def test_every_valid_output_is_more_likely_than_not_within_ten_percent():
     _pipeline, estimates = estimates_of(stop.config("lugre-tr"), stop.frames)
     valid = [e for e in estimates if e.status == Status.VALID]
     assert valid and min(e.confidence for e in valid) >= 0.5
+
+
+def test_a_confidence_without_any_spread_is_certain_not_a_crash():
+    # model_mismatch may be configured to 0; a fit with no spread and no drift then has σ = 0.
+    est = LugreTrustRegionEstimator(dataclasses.replace(LugreTROptions(), model_mismatch=0.0, settle_s=0.0))
+    est._excited_since_s = 0.0
+    assert est._confidence(0.1, 0.5, 0.0, 1.0) == 1.0

@@ -33,6 +33,18 @@ def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=Non
         t += 0.01
 
 
+def campaign_stop_estimates(seed):
+    """One stop of the randomised campaign (its car, DBC and config) through the replay pipeline:
+    (the simulated stop, lugre-tr's estimates)."""
+    from frictiond.campaign.draw import draw_stop
+    from frictiond.campaign.simulate import simulate_stop
+    from frictiond.replay import estimates_of
+
+    stop = simulate_stop(draw_stop(seed))
+    _pipeline, estimates = estimates_of(stop.config("lugre-tr"), stop.frames)
+    return stop, estimates
+
+
 def lugre_curve(p):
     return (lambda lam, v: tm.mu(lam, v, p)), (lambda v: tm.peak(v, p)[1])
 
@@ -452,13 +464,9 @@ def test_a_deceleration_abs_releasing_below_a_soft_peak_gives_no_wrong_valid():
     # still rising. Before the top-of-slips test, 299 of 461 VALID outputs were 20-40 % low.
     # The snow wheels do show their peak, but the published mean of the four would rest on the
     # dry wheels' extrapolation: excited, yet never VALID.
-    from frictiond.campaign.draw import draw_stop
     from frictiond.campaign.score import estimator_scores
-    from frictiond.campaign.simulate import simulate_stop
-    from frictiond.replay import estimates_of
 
-    stop = simulate_stop(draw_stop(40))
-    _pipeline, estimates = estimates_of(stop.config("lugre-tr"), stop.frames)
+    stop, estimates = campaign_stop_estimates(40)
     scores = estimator_scores(estimates, stop.truth)
     assert scores["false_valid"] == 0
     assert any(e.detail and e.detail.get("excitation", 0.0) > 0 for e in estimates)
@@ -514,13 +522,9 @@ def test_a_slip_controller_holding_its_target_below_a_far_peak_gives_no_valid():
     # (±0.001) on dry cobblestone, whose peak lies near λ = 0.4: 53 % of the grip. Its releases
     # mark every wheel as worked by an ABS, but the slips do not spread: the shape tests saw
     # noise, passed at random, and 357 VALID outputs were 40-45 % low.
-    from frictiond.campaign.draw import draw_stop
     from frictiond.campaign.score import estimator_scores
-    from frictiond.campaign.simulate import simulate_stop
-    from frictiond.replay import estimates_of
 
-    stop = simulate_stop(draw_stop(581))
-    _pipeline, estimates = estimates_of(stop.config("lugre-tr"), stop.frames)
+    stop, estimates = campaign_stop_estimates(581)
     assert estimator_scores(estimates, stop.truth)["valid"] == 0
 
 
@@ -575,12 +579,7 @@ def test_every_valid_output_is_more_likely_than_not_within_ten_percent():
     # The confidence is the probability of μ_max within 10 %; the hysteresis that keeps a VALID
     # through a one-cycle dip must stay above even odds. Dev stop 279 (a threshold ABS on a Magic
     # Formula snow tyre) dips to 0.45-0.5 for 142 outputs while VALID when kept down to 0.45.
-    from frictiond.campaign.draw import draw_stop
-    from frictiond.campaign.simulate import simulate_stop
-    from frictiond.replay import estimates_of
-
-    stop = simulate_stop(draw_stop(279))
-    _pipeline, estimates = estimates_of(stop.config("lugre-tr"), stop.frames)
+    _stop, estimates = campaign_stop_estimates(279)
     valid = [e for e in estimates if e.status == Status.VALID]
     assert valid and min(e.confidence for e in valid) >= 0.5
 

@@ -131,6 +131,8 @@ class LugreTROptions:
     evidence_interval_s: float = 0.35     # the data tell about the peak once per this long (an ABS cycle), not
     #   once per sample: μ_max's spread grows by √(this / the sample period)
     model_mismatch: float = 0.06          # relative floor of the uncertainty (the road is not LuGre)
+    misfit_bin_samples: int = 10          # the data above the fitted curve count in slip bands of at least this many
+    misfit_peak_ratio: float = 1.0        # ... and miss the peak by this many times their mean excess over a band
     drift_window_s: float = 0.15
     settle_s: float = 0.08                # confidence ramps up over the first excited instants
     hold_s: float = 2.0                   # VALID is kept this long after braking ends
@@ -329,6 +331,11 @@ def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: l
 
 _WHEEL_COLUMN = np.arange(N_WHEELS)[:, None]
 _WHEEL_STD_KEYS = tuple(f"wheel_std_{i}" for i in range(N_WHEELS))
+
+# Bands of slip, as multiples of a wheel's fitted peak slip, in which `_excess_over_fit` averages
+# the data's excess over the fitted curve: narrow around the peak, wider past it.
+_MISFIT_SLIP_BANDS = np.array([0.5, 0.75, 0.9, 1.1, 1.4, 2.0, 3.0])
+
 
 class _Window:
     """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append.
@@ -576,6 +583,8 @@ class LugreTrustRegionEstimator:
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
         self._excitation_why: list = ["", "", "", ""]
+        self._data_above_fit = 0.0
+        self._numpy_residuals: np.ndarray | None = None
         self._innovation_score = 0.0
         self._last_jump_s = -math.inf
         self._last_peak_slips: list[float] | None = None
@@ -607,6 +616,7 @@ class LugreTrustRegionEstimator:
         """
         self._excitation_cache = None
         self._excitation_why: list = ["", "", "", ""]
+        self._data_above_fit = 0.0
         self._event_start_s = self._last_sample_s
         self._cov_unit = None
         self._slip_support = None
@@ -846,6 +856,7 @@ class LugreTrustRegionEstimator:
             self._last_valid = None
             self._last_excited_s = -math.inf
             self._excitation_cache = None
+            self._data_above_fit = 0.0
             self._mu_history.clear()
             self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
             self._measured_peaks = [0.0] * N_WHEELS
@@ -993,6 +1004,7 @@ class LugreTrustRegionEstimator:
         w_sum = float(weights.sum())
         sw = np.sqrt(weights) * (1.0 / o.measurement_std)
         normal, r_data = self._solve_numpy(sw)
+        self._numpy_residuals = r_data / sw
         self._fits += 1
         self._last_fit_s = now_s
         self._innovation_score = self._innovation(now_s, times, r_data, weights)
@@ -1108,6 +1120,7 @@ class LugreTrustRegionEstimator:
         else:
             numbers = _peak_report_numpy(*args, self._params(x), *tail)
         wheel_mu, wheel_lam, self._capped, mu_max, slip_star, mu_std, wheel_std = numbers
+        fitted_mu = wheel_mu
         measured = self._measured_peaks
         if self._innovation_score <= o.jump_threshold and any(m > f for m, f in zip(measured, wheel_mu)):
             # A wheel's data rose above its fitted peak (a sharp peak the static model rounds
@@ -1126,10 +1139,12 @@ class LugreTrustRegionEstimator:
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
         if self._due(1) or self._excitation_cache is None:
             self._excitation_cache = self._excitation(weights, wheel_mu, wheel_lam, v_eval)
+            self._data_above_fit = self._excess_over_fit(fitted_mu, wheel_mu, wheel_lam)
         excitation = self._excitation_cache
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(theta_list) / N_WHEELS
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(samples),
+                  "data_above_fit": self._data_above_fit,
                   "sigma0": float(shared[3]), "v_s": float(shared[5]), "sigma2": float(shared[6]),
                   "jumps": float(self._jumps)}
         detail.update(zip(_WHEEL_STD_KEYS, map(float, wheel_std)))
@@ -1286,7 +1301,7 @@ class LugreTrustRegionEstimator:
         last `drift_window_s` (an estimate still moving is not settled), a floor for model
         mismatch, the excitation, a ramp over the first `settle_s` of excitation (the first fits
         after onset are the worst), and the bias of the newest residuals (a road changing under
-        the fit).
+        the fit), and how far the data rise above the fitted curve (`_excess_over_fit`).
         """
         o = self.options
         history = self._mu_history
@@ -1328,7 +1343,8 @@ class LugreTrustRegionEstimator:
         # and more samples of the same cycles do not shrink it. On the randomised campaign's
         # independent truths the error is 4–6 times that spread, 4 with wheel speeds at 50 Hz and
         # 6 at 100 Hz: √(`evidence_interval_s` / sample period).
-        spread2 = self._variance_inflation * rel_std * rel_std + drift**2 + o.model_mismatch**2
+        spread2 = (self._variance_inflation * rel_std * rel_std + drift**2 + o.model_mismatch**2
+                   + (o.misfit_peak_ratio * self._data_above_fit)**2)
         ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
         # Newest residuals biased beyond the noise: the road may be changing under the fit.
         excess = max(0.0, self._innovation_score - o.jump_threshold)
@@ -1338,6 +1354,50 @@ class LugreTrustRegionEstimator:
         confidence = excitation * ramp * innovation * within_band
         confidence *= input_quality.confidence_factor(self._input_share)
         return confidence if math.isfinite(confidence) else 0.0
+
+    def _excess_over_fit(self, fitted_mu: Sequence[float], wheel_mu: Sequence[float],
+                         wheel_lam: Sequence[float]) -> float:
+        """How far the window's data rise above the curve published, as a share of its peak: the
+        largest mean of (μ_measured − μ_fit − lift)/μ_max,wheel over the samples of a band of slips
+        (relative to the wheel's fitted peak slip, from half of it up) with `misfit_bin_samples`
+        or more; 0 if none.
+
+        Where the tyre gave more than the curve says, its peak is higher than the curve's: the
+        static model rounding off a sharp peak (a Magic Formula tyre that
+        falls 30 % past it, an ABS dwelling deep in slip pulling the fit down to the plateau)
+        shows here, as a band of slips the fit passes under on every ABS cycle. The spread of
+        μ_max cannot show it (the samples agree with each other), the model-mismatch floor is
+        the same for every tyre: this is the mismatch the data measure. The excess is largest at
+        the tyre's peak and falls to nothing at the band's edges: its mean over a band is about
+        half its top (`misfit_peak_ratio`). The lift is how far the published peak was raised above
+        the fitted one (by the wheel's measured peak or the car's deceleration): that much of
+        the excess is already answered.
+        """
+        w = self._window
+        lo, hi = w.start, w.end
+        if hi - lo < self.options.misfit_bin_samples:
+            return 0.0
+        if self.core is not None:
+            sw = w.scratch[3, lo:hi]
+            model_minus_data = np.divide(w.scratch[0, lo:hi], sw, out=np.zeros(hi - lo), where=sw > 0)
+        elif self._numpy_residuals is not None and len(self._numpy_residuals) == hi - lo:
+            model_minus_data = self._numpy_residuals
+        else:
+            return 0.0
+        wheel = w.wheel[lo:hi]
+        published = np.maximum(np.asarray(wheel_mu, dtype=float), 1e-3)
+        lift = published - np.asarray(fitted_mu, dtype=float)
+        peak_mu = published[wheel]
+        peak_slip = np.maximum(np.asarray(wheel_lam, dtype=float), 1e-3)[wheel]
+        band = np.searchsorted(_MISFIT_SLIP_BANDS, w.slip[lo:hi] / peak_slip, side="right")
+        excess = (-model_minus_data - lift[wheel]) / peak_mu
+        counts = np.bincount(band, minlength=len(_MISFIT_SLIP_BANDS) + 1)
+        sums = np.bincount(band, weights=excess, minlength=len(_MISFIT_SLIP_BANDS) + 1)
+        full = counts >= self.options.misfit_bin_samples
+        full[0] = False   # (below half the peak slip: the slip stiffness and the pedal's transient, not the peak)
+        if not full.any():
+            return 0.0
+        return max(0.0, float((sums[full] / counts[full]).max()))
 
     def _axle_scale(self, wheel: int) -> float:
         """Correction of a wheel's utilised μ for the front/rear brake-gain split (see below)."""

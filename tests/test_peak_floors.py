@@ -41,14 +41,27 @@ def overshooting_abs(options: LugreTROptions, seed: int = 2):
 
 
 def test_a_sharp_peak_is_not_published_far_below_what_the_wheels_measured():
-    def errors(options):
+    def errors(options, statuses=(Status.VALID,)):
         return [(e.mu_max - peak) / peak for t, e, peak in overshooting_abs(options)
-                if e.status == Status.VALID and t > 0.6]
+                if e.status in statuses and t > 0.6]
 
-    rounded = errors(dataclasses.replace(LugreTROptions(), peak_group_samples=1))   # (the bound off)
-    bounded = errors(LugreTROptions())
-    assert np.mean(rounded) < -0.15          # the static model alone: ~20 % low
+    bound_off = dataclasses.replace(LugreTROptions(), peak_group_samples=1)
+    rounded = errors(bound_off, (Status.VALID, Status.CONVERGING))
+    assert np.mean(rounded) < -0.15          # the static model alone: ~20 % low ...
+    assert not [x for x in errors(bound_off) if x < -0.2]   # ... and, with the data above its curve, not VALID
+    bounded = errors(LugreTROptions(), (Status.VALID, Status.CONVERGING))
     assert np.mean(bounded) > -0.12 and max(bounded) < 0.02   # lifted towards the data, never above the peak
+
+
+def test_data_above_the_fitted_curve_cost_confidence():
+    # The same overshooting ABS: the data rise above the rounded fit in the slips around the peak.
+    def run(options):
+        return [e for t, e, _ in overshooting_abs(options, seed=4) if t > 1.0 and e.detail]
+
+    measured = run(LugreTROptions())
+    ignored = run(dataclasses.replace(LugreTROptions(), misfit_peak_ratio=0.0))
+    assert np.median([e.detail["data_above_fit"] for e in measured]) > 0.03
+    assert (np.mean([e.confidence for e in measured]) < np.mean([e.confidence for e in ignored]) - 0.05)
 
 
 def test_the_cars_deceleration_bounds_the_peak_from_below():

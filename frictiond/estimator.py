@@ -595,6 +595,7 @@ class LugreTrustRegionEstimator:
         self._peak_seen_speed = 0.0
         self._abs_seen_s = [-math.inf] * N_WHEELS
         self._wheel_shown_s = [-math.inf] * N_WHEELS
+        self._shape_showed_peak = [False] * N_WHEELS
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
@@ -627,6 +628,7 @@ class LugreTrustRegionEstimator:
         self._peak_seen_speed = 0.0
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._wheel_shown_s = [-math.inf] * N_WHEELS
+        self._shape_showed_peak = [False] * N_WHEELS
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
@@ -860,7 +862,8 @@ class LugreTrustRegionEstimator:
             self._mu_history.clear()
             self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
             self._measured_peaks = [0.0] * N_WHEELS
-            self._wheel_shown_s = [-math.inf] * N_WHEELS   # (the peaks they showed were the old road's)
+            self._wheel_shown_s = [-math.inf] * N_WHEELS
+            self._shape_showed_peak = [False] * N_WHEELS   # (the peaks they showed were the old road's)
             # (`_peak_seen_speed` stays: the stop is still in ABS, only on another road; a wheel held
             # past the new fit's peak is evidence of it as much as of the old one's.)
 
@@ -1575,12 +1578,25 @@ class LugreTrustRegionEstimator:
         if not spread:
             # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
             # ice): the shape of the curve near its peak is not observed ...
-            if peak_seen and lam_hi >= o.excitation_min_slip and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star:
-                # ... unless this stop's data have shown the peak already and the wheel now
-                # stays past it, using the grip the fit says is there (ABS holding a wheel
-                # on an ice plateau): the peak is still being used, not left behind.
+            if (peak_seen and self._shape_showed_peak[wheel] and lam_hi >= o.excitation_min_slip
+                    and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star):
+                # ... unless this stop's data have shown the peak already, this wheel's own last
+                # slips with spread said so, and the wheel now stays past it, using the grip the
+                # fit says is there (ABS holding a wheel on an ice plateau): the peak is still
+                # being used, not left behind. (Where the wheel's slips last spread its data were
+                # still rising, the fit's peak under a held slip is where the fit put it, free
+                # to: a slip target short of the peak leaves nothing to locate it.)
                 return ("past the peak ({:.2f})", lam_lo / lam_star), 1.0, False
             return "no slip spread", 0.0, True
+        verdict = self._shape_verdict(wheel, stats, mu_star, lam_star, fit_at_hi, capped)
+        self._shape_showed_peak[wheel] = verdict[1] >= o.excitation_slip_ratio
+        return verdict
+
+    def _shape_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float,
+                       fit_at_hi: float, capped: bool) -> tuple[Any, float, bool]:
+        """`_wheel_verdict` for a wheel whose slips spread: what the shape of its μ–slip data says."""
+        o = self.options
+        n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = stats
         # (With an ABS too: a deceleration-triggered ABS releases a soft tyre at half its grip,
         # by its own thresholds; only the data bending over show the tyre itself near its peak.)
         bent = self._bending(lam_hi, s2, s3, s4, y1, y2)

@@ -528,6 +528,27 @@ def test_a_slip_controller_holding_its_target_below_a_far_peak_gives_no_valid():
     assert estimator_scores(estimates, stop.truth)["valid"] == 0
 
 
+def test_a_held_slip_is_past_the_peak_only_where_its_wheel_last_showed_the_peak():
+    # Seed 2803 (outside the development seeds): a slip controller holds every wheel at λ = 0.10
+    # on Magic Formula snow, 80 % of the grip. One early excitation check passed; every later one
+    # with spread slips said "still rising". When the spread data left the window the fit moved
+    # its peak under the held slip, and "held past the peak" made 84 outputs VALID, 19 % low.
+    from frictiond.campaign.score import estimator_scores
+
+    stop, estimates = campaign_stop_estimates(2803)
+    assert estimator_scores(estimates, stop.truth)["valid"] == 0
+
+
+def test_a_held_slip_past_a_peak_its_wheels_showed_stays_valid():
+    # Development stop 923: the same kind of controller holds λ = 0.12 on a flat-topped snow curve
+    # at 97 % of its grip, after the wheels' spread slips showed the top: that carry is evidence.
+    from frictiond.campaign.score import estimator_scores
+
+    stop, estimates = campaign_stop_estimates(923)
+    scores = estimator_scores(estimates, stop.truth)
+    assert scores["valid"] > 300 and scores["false_valid"] == 0 and scores["mae"] < 0.02
+
+
 @pytest.mark.parametrize("elasticity, fitted_peak_slip, contradicted", [
     (0.9, 0.10, True),    # μ rising at 0.9 of μ/λ at λ 0.2, twice past the fitted peak
     (0.5, 0.10, False),   # rising, but not clearly enough to contradict the fit

@@ -26,6 +26,9 @@ Design (the choices model.md leaves open, and why):
   do past their peak) gates the status,
   and the confidence comes from the Gauss–Newton covariance σ²(JᵀWJ)⁻¹ pushed onto μ_max by the
   delta method, with σ² from the residuals (model mismatch counts as noise).
+
+The excitation evidence is `peak_evidence.PeakEvidence`, the confidence and the vetoes on VALID
+`estimate_confidence.EstimateConfidence`: parts of the estimator class, each in its own module.
 """
 from __future__ import annotations
 
@@ -33,12 +36,11 @@ import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass, fields
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from . import trust_region
-from . import input_quality
 
 try:
     # The per-update fit compiled (setup.py builds it when a C compiler is there); without it,
@@ -48,13 +50,12 @@ except ImportError:  # pragma: no cover - depends on the install
     compiled_fit = None
 from .samples import FrictionEstimate, PhysicalSample, Status
 from .tyre_model import (_SMALL_Z, MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials,
-                         braking_mu_and_partials_few, compiled_params, mu_and_jacobian_theta, peaks)
-from .vehicle import GRAVITY_MPS2, VehicleParams
+                         braking_mu_and_partials_few, mu_and_jacobian_theta, peaks)
+from .vehicle import VehicleParams
+from .estimate_confidence import EstimateConfidence
+from .peak_evidence import N_WHEELS, PeakEvidence, _Runaway
 
 SHARED = ("sigma0", "v_s", "sigma2")
-N_WHEELS = 4
-# A wheel verdict's proximity when the wheel's data contradict the fitted curve (`_wheel_verdict`).
-CONTRADICTED = -1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -180,105 +181,6 @@ class LugreTROptions:
             raise ValueError("theta_min: must be > 0")
 
 
-def _quantile_pair(values: np.ndarray, q_low: float, q_high: float) -> tuple[float, float]:
-    """`np.quantile(values, (q_low, q_high))` (linear method, finite values), by one partition."""
-    n = len(values)
-    picks = []
-    for q in (q_low, q_high):
-        virtual = (n - 1) * q
-        i = min(int(math.floor(virtual)), n - 1)
-        picks.append((i, virtual - i))
-    kth = sorted({min(k, n - 1) for i, _ in picks for k in (i, i + 1)})
-    part = np.partition(values, kth)
-    out = []
-    for i, t in picks:
-        if i >= n - 1:
-            out.append(float(part[n - 1]))
-            continue
-        a, b = float(part[i]), float(part[i + 1])
-        diff = b - a
-        out.append(b - diff * (1 - t) if t >= 0.5 else a + diff * t)
-    return out[0], out[1]
-
-
-def _wheel_stats_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, lag: int,
-                       elasticity: float) -> tuple[tuple[float, ...], ...]:
-    """Per wheel, over the samples given (time order), what the slip range and the excitation
-    test read from them: n; the 10 % and 90 % slip quantiles; the slips of order k_lo and k_hi
-    and the μ of order k_hi (k = max(1, n // 10) from each end); the fastest slip run-away over
-    `lag` samples whose force did not follow (Δμ/μ ≤ elasticity·Δλ/λ), −∞ without any; the
-    sums Σλ², Σλ³, Σλ⁴, Σλμ, Σλ²μ of the through-origin quadratic. `_fitcore.wheel_stats` is
-    the same, compiled."""
-    out = []
-    for i in range(N_WHEELS):
-        sel = wheel == i
-        n = int(np.count_nonzero(sel))
-        if n == 0:
-            out.append((0.0,) + (math.nan,) * 6 + (0.0,) * 5)
-            continue
-        lam, m, t = slip[sel], mu[sel], times[sel]
-        q_low, q_high = _quantile_pair(lam, 0.1, 0.9)
-        k_hi = max(0, n - 1 - max(1, n // 10))
-        k_lo = min(n - 1, max(1, n // 10))
-        ordered = np.partition(lam, (k_lo, k_hi))
-        mu_hi = float(np.partition(m, k_hi)[k_hi])
-        d_lam = lam[lag:] - lam[:-lag]
-        rate = d_lam / np.maximum(t[lag:] - t[:-lag], 1e-3)
-        rate[(m[lag:] - m[:-lag]) * lam[:-lag] > elasticity * d_lam * m[:-lag]] = 0.0
-        best = float(rate.max()) if len(rate) else -math.inf
-        lam2 = lam * lam
-        out.append((float(n), q_low, q_high, float(ordered[k_lo]), float(ordered[k_hi]), mu_hi, best,
-                    float(lam @ lam), float(lam @ lam2), float(lam2 @ lam2), float(lam @ m), float(lam2 @ m)))
-    return tuple(out)
-
-
-def _data_peaks_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, k: int, min_samples: int,
-                      margin: float) -> list[float]:
-    """`LugreTrustRegionEstimator._data_peaks`'s statistics on the samples given (time order);
-    `_fitcore.data_peaks` is the same, compiled."""
-    out = [0.0] * N_WHEELS
-    # All wheels at once (a handful of numpy calls, not a handful per wheel): the samples in
-    # (wheel, slip) order, each wheel's first n − n mod k of them in groups of k.
-    order = np.lexsort((slip, wheel))
-    counts = np.bincount(wheel.astype(np.intp), minlength=N_WHEELS)[:N_WHEELS]
-    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
-    used = np.where(counts >= max(k, min_samples), counts - counts % k, 0)
-    if not used.any():
-        return out
-    picks = np.concatenate([order[a:a + u] for a, u in zip(starts.tolist(), used.tolist()) if u])
-    groups = mu[picks].reshape(-1, k)
-    means = groups.mean(axis=1)
-    spread = np.sqrt(((groups - means[:, None]) ** 2).sum(axis=1) / (k - 1))
-    lower = means - 2.0 * spread / math.sqrt(k)
-    first = 0
-    for i, u in enumerate(used.tolist()):
-        if u:
-            out[i] = max(0.0, float(lower[first:first + u // k].max()) * (1.0 - margin))
-            first += u // k
-    return out
-
-
-def _top_elasticity_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, start: int,
-                          end: int, since: float, wheel_i: int, min_n: int, min_upper: int) -> float | None:
-    """`LugreTrustRegionEstimator._top_elasticity` on the window's columns (the compiled
-    `top_elasticity`'s reference)."""
-    lo = int(times[start:end].searchsorted(since)) + start
-    mine = wheel[lo:end] == wheel_i
-    slips = slip[lo:end][mine]
-    if len(slips) < min_n or len(slips) < 1:
-        return None
-    mus = mu[lo:end][mine]
-    median, top = np.quantile(slips, (0.5, 0.95))
-    upper = (slips >= median) & (slips <= top)
-    if int(upper.sum()) < min_upper or not top - median >= 1e-4:
-        return None
-    ls, us = slips[upper], mus[upper]
-    l_mean, u_mean = float(ls.mean()), float(us.mean())
-    dl = ls - l_mean
-    slope = float(dl @ (us - u_mean)) / max(float(dl @ dl), 1e-12)
-    return slope * l_mean / max(u_mean, 1e-6)
-
-
 def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: list[float], slip_floor: list[float],
                        peak_extrapolation: float, extrapolation_max_slip: float, thetas: list[float], v: float,
                        p: LugreParams, scales: tuple[float, float, float], cov_unit: np.ndarray,
@@ -331,10 +233,6 @@ def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: l
 
 _WHEEL_COLUMN = np.arange(N_WHEELS)[:, None]
 _WHEEL_STD_KEYS = tuple(f"wheel_std_{i}" for i in range(N_WHEELS))
-
-# Bands of slip, as multiples of a wheel's fitted peak slip, in which `_excess_over_fit` averages
-# the data's excess over the fitted curve: narrow around the peak, wider past it.
-_MISFIT_SLIP_BANDS = np.array([0.5, 0.75, 0.9, 1.1, 1.4, 2.0, 3.0])
 
 
 class _Window:
@@ -445,14 +343,6 @@ class _Window:
         return self.slip[s], self.speed[s], self.mu[s], self.time[s], self.wheel[s]
 
 
-@dataclass(slots=True)
-class _Runaway:
-    """A wheel's latest runaway into slip, until confirmed or `runaway_confirm_s` old."""
-    since_s: float = -math.inf
-    reached: float = 0.0              # the slip it had reached when seen
-    confirmed: bool = False
-
-
 class _SmoothedMaximum:
     """The maximum, over a trailing span, of a series' mean over `smoothing_s`: O(1) a sample
     (a running sum for the mean, a monotonic queue for the maximum)."""
@@ -495,7 +385,7 @@ class _SmoothedMaximum:
         self.highest = 0.0
 
 
-class LugreTrustRegionEstimator:
+class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
     """Recursive, bounded trust-region NLLS fit of static LuGre; one `update` per bus cycle."""
 
     kind = "lugre-tr"
@@ -1181,89 +1071,6 @@ class LugreTrustRegionEstimator:
             self._last_valid = estimate
         return estimate
 
-    def _data_peaks(self) -> list[float]:
-        """Per wheel, the highest μ its newest samples (`excitation_window_s`) show with
-        confidence; 0 without enough of them.
-
-        The samples in slip order, in groups of `peak_group_samples` neighbours: each group's
-        mean μ less twice its standard error; the highest of these. Means over neighbouring slips
-        average the noise of the wheel-acceleration filter (several % of μ on dry asphalt under
-        ABS) that a single high sample carries; the two standard errors cover the maximum over
-        a few groups picking the noisiest.
-        """
-        o = self.options
-        w = self._window
-        k = o.peak_group_samples
-        out = [0.0] * N_WHEELS
-        if k <= 1 or len(w) < k or self._last_sample_s - self._event_start_s < o.measured_peak_settle_s:
-            # (Early in a stop a wheel's μ carries the brake gain's error, ±20 %, until the front
-            # end's body-equation check has corrected it: then it bounds nothing.)
-            return out
-        lo = int(w.time[w.start:w.end].searchsorted(self._last_sample_s - o.excitation_window_s)) + w.start
-        if self.core is not None:
-            return self.core.data_peaks(w.slip, w.mu, w.wheel, lo, w.end, k, self._min_wheel_samples,
-                                        o.measured_peak_margin)
-        return _data_peaks_numpy(w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end], k, self._min_wheel_samples,
-                                 o.measured_peak_margin)
-
-    def _body_floor(self, now_s: float) -> float:
-        """The least μ_max the car's own deceleration allows: the highest utilisation it showed
-        over the last `body_floor_window_s` (each a mean over `body_floor_smoothing_s`), less the
-        accelerometer's margins; 0 without such data. The load-weighted μ_max bounds the total
-        tyre force over the weight: Σ μ_i F_N,i / Σ F_N,i ≤ Σ μ_max,i F_N,i / Σ F_N,i."""
-        o = self.options
-        best = self._body_mu.maximum(now_s - o.body_floor_window_s)
-        return 0.0 if best is None else self._less_accelerometer_margins(best)
-
-    def _less_accelerometer_margins(self, body_mu: float) -> float:
-        """A body utilisation less what the accelerometer's offset and the car's pitch may add."""
-        o = self.options
-        return body_mu * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
-
-    def _barred_from_valid(self, now_s: float, mu_max: float, wheel_mu: Sequence[float]) -> bool:
-        """Whether μ_max may not be VALID whatever its confidence: below the stop's floor, from a
-        model that misfits the tyre (`_misfit`), or leaning on wheels that have not shown their
-        peak (`_leans_on_unshown_wheels`)."""
-        return (mu_max < self._stop_floor() or self._misfit(now_s)
-                or self._leans_on_unshown_wheels(now_s, wheel_mu))
-
-    def _leans_on_unshown_wheels(self, now_s: float, wheel_mu: Sequence[float]) -> bool:
-        """Whether μ_max depends on the peaks of wheels whose data have not shown them lately.
-
-        μ_max is the load-weighted mean of the four wheels' peaks; excitation needs only one
-        wheel at its peak. On one road the others' fits follow it (they share the road), but on
-        split μ a wheel on the grippy side, its slip held far below its peak (a slip target
-        short of a cobblestone's peak at 0.4), contributes an extrapolation: VALID with a mean
-        as wrong as that. So μ_max is compared with the mean the shown wheels' peaks alone give.
-        """
-        o = self.options
-        hold = o.wheel_evidence_hold_s
-        shown = [now_s - t <= hold for t in self._wheel_shown_s]
-        if all(shown) or not any(shown):
-            return False
-        share = self._load_share
-        shown_weight = sum(w for w, s in zip(share, shown) if s)
-        reference = sum(w * m for w, m, s in zip(share, wheel_mu, shown) if s) / max(shown_weight, 1e-9)
-        total = max(sum(share), 1e-9)
-        published = sum(w * m for w, m in zip(share, wheel_mu)) / total
-        if_shown = sum(w * (m if s else reference) for w, m, s in zip(share, wheel_mu, shown)) / total
-        return abs(published - if_shown) > o.unshown_wheel_tolerance * max(if_shown, 1e-6)
-
-    def _misfit(self, now_s: float) -> bool:
-        """Whether `misfit_changes` changes of road were detected within `misfit_window_s`. A real
-        change shows at most twice in a few seconds, once per axle a wheelbase apart; more often,
-        the newest residuals' bias is the static model not describing this tyre (a sharp peak the
-        wheels pass in a few ms, a tyre whose force lags its slip): its μ_max is not VALID."""
-        times = self._jump_times
-        while times and now_s - times[0] > self.options.misfit_window_s:
-            times.popleft()
-        return self.options.misfit_changes > 0 and len(times) >= self.options.misfit_changes
-
-    def _stop_floor(self) -> float:
-        """The least μ_max the car's highest utilisation since this stop (or road) began allows,
-        with the tolerance of a fit that rounds a sharp peak: a fit below it has forgotten the
-        peak the car used (the wheels held deep in slip since), so its μ_max is not VALID."""
-        return self._less_accelerometer_margins(self._body_mu.highest) * (1.0 - self.options.stop_floor_tolerance)
 
     def _restate(self, last: FrictionEstimate, now_s: float) -> FrictionEstimate:
         """The last (CONVERGING) fit again, at a cycle without usable samples.
@@ -1295,112 +1102,6 @@ class LugreTrustRegionEstimator:
         every = self.options.excitation_every
         return every <= 1 or self._fits % every == step % every
 
-    def _confidence(self, now_s: float, mu_max: float, mu_std: float, excitation: float) -> float:
-        """0…1: the probability that μ_max is within `confidence_band` of the road's, as far as
-        these data tell.
-
-        The Gauss–Newton covariance alone measures noise, not model mismatch. Combined here: the
-        delta-method spread of μ_max (from the residuals' own size), the drift of μ_max over the
-        last `drift_window_s` (an estimate still moving is not settled), a floor for model
-        mismatch, the excitation, a ramp over the first `settle_s` of excitation (the first fits
-        after onset are the worst), and the bias of the newest residuals (a road changing under
-        the fit), and how far the data rise above the fitted curve (`_excess_over_fit`).
-        """
-        o = self.options
-        history = self._mu_history
-        history.append((now_s, mu_max))
-        while history and history[0][0] < now_s - o.drift_window_s - 0.05:
-            history.popleft()
-        if excitation <= 0.0:
-            if now_s - self._excited_since_s > 0.5:
-                self._excited_since_s = math.inf
-            return 0.0
-        if self._excited_since_s == math.inf or now_s < self._excited_since_s:
-            self._excited_since_s = now_s
-        # The reference is the median of the fits around `drift_window_s` ago (± a sixth of it),
-        # not the single oldest one: a fit that dipped for a cycle (an ABS release, 6 % on MF
-        # ice) would otherwise cost the confidence twice, when it happens and again a drift
-        # window later as the reference, making a settled estimate CONVERGING for a cycle.
-        since = now_s - o.drift_window_s * (7.0 / 6.0)
-        reference = (self.core.drift_reference(history, since, o.drift_window_s / 3.0) if self.core is not None
-                     else None)
-        if reference is None:
-            values: list[float] = []
-            until = math.inf
-            for t, m in history:     # (ascending times)
-                if t < since:
-                    continue
-                if not values:
-                    until = t + o.drift_window_s / 3.0
-                elif t > until:
-                    break
-                values.append(m)
-            values.sort()
-            reference = values[len(values) // 2]   # (never empty: this fit was just appended)
-        scale = max(mu_max, 0.05)
-        drift = abs(mu_max - reference) / scale
-        rel_std = mu_std * self._residual_scale / scale if math.isfinite(mu_std) else 10.0
-        # The error's σ: the delta-method spread, the drift and the floor. The spread counts the
-        # samples as independent evidence of the peak; they are not: a static model's misfit of a
-        # tyre (a sharp peak rounded off, a force lagging its slip) repeats over each ABS cycle,
-        # and more samples of the same cycles do not shrink it. On the randomised campaign's
-        # independent truths the error is 4–6 times that spread, 4 with wheel speeds at 50 Hz and
-        # 6 at 100 Hz: √(`evidence_interval_s` / sample period).
-        spread2 = (self._variance_inflation * rel_std * rel_std + drift**2 + o.model_mismatch**2
-                   + (o.misfit_peak_ratio * self._data_above_fit)**2)
-        ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
-        # Newest residuals biased beyond the noise: the road may be changing under the fit.
-        excess = max(0.0, self._innovation_score - o.jump_threshold)
-        innovation = math.exp(-excess * excess / 8.0)
-        # (σ is 0 only with `model_mismatch` configured to 0 and a fit without spread or drift)
-        within_band = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
-        confidence = excitation * ramp * innovation * within_band
-        confidence *= input_quality.confidence_factor(self._input_share)
-        return confidence if math.isfinite(confidence) else 0.0
-
-    def _excess_over_fit(self, fitted_mu: Sequence[float], wheel_mu: Sequence[float],
-                         wheel_lam: Sequence[float]) -> float:
-        """How far the window's data rise above the curve published, as a share of its peak: the
-        largest mean of (μ_measured − μ_fit − lift)/μ_max,wheel over the samples of a band of slips
-        (relative to the wheel's fitted peak slip, from half of it up) with `misfit_bin_samples`
-        or more; 0 if none.
-
-        Where the tyre gave more than the curve says, its peak is higher than the curve's: the
-        static model rounding off a sharp peak (a Magic Formula tyre that
-        falls 30 % past it, an ABS dwelling deep in slip pulling the fit down to the plateau)
-        shows here, as a band of slips the fit passes under on every ABS cycle. The spread of
-        μ_max cannot show it (the samples agree with each other), the model-mismatch floor is
-        the same for every tyre: this is the mismatch the data measure. The excess is largest at
-        the tyre's peak and falls to nothing at the band's edges: its mean over a band is about
-        half its top (`misfit_peak_ratio`). The lift is how far the published peak was raised above
-        the fitted one (by the wheel's measured peak or the car's deceleration): that much of
-        the excess is already answered.
-        """
-        w = self._window
-        lo, hi = w.start, w.end
-        if hi - lo < self.options.misfit_bin_samples:
-            return 0.0
-        if self.core is not None:
-            sw = w.scratch[3, lo:hi]
-            model_minus_data = np.divide(w.scratch[0, lo:hi], sw, out=np.zeros(hi - lo), where=sw > 0)
-        elif self._numpy_residuals is not None and len(self._numpy_residuals) == hi - lo:
-            model_minus_data = self._numpy_residuals
-        else:
-            return 0.0
-        wheel = w.wheel[lo:hi]
-        published = np.maximum(np.asarray(wheel_mu, dtype=float), 1e-3)
-        lift = published - np.asarray(fitted_mu, dtype=float)
-        peak_mu = published[wheel]
-        peak_slip = np.maximum(np.asarray(wheel_lam, dtype=float), 1e-3)[wheel]
-        band = np.searchsorted(_MISFIT_SLIP_BANDS, w.slip[lo:hi] / peak_slip, side="right")
-        excess = (-model_minus_data - lift[wheel]) / peak_mu
-        counts = np.bincount(band, minlength=len(_MISFIT_SLIP_BANDS) + 1)
-        sums = np.bincount(band, weights=excess, minlength=len(_MISFIT_SLIP_BANDS) + 1)
-        full = counts >= self.options.misfit_bin_samples
-        full[0] = False   # (below half the peak slip: the slip stiffness and the pedal's transient, not the peak)
-        if not full.any():
-            return 0.0
-        return max(0.0, float((sums[full] / counts[full]).max()))
 
     def _axle_scale(self, wheel: int) -> float:
         """Correction of a wheel's utilised μ for the front/rear brake-gain split (see below)."""
@@ -1439,271 +1140,6 @@ class LugreTrustRegionEstimator:
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
         self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
 
-    def _slip_range(self, weights: np.ndarray | None) -> tuple[list[float], list[float]]:
-        """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
-        without data gets (0, ∞): no bound on either side."""
-        low = [0.0] * N_WHEELS
-        high = [math.inf] * N_WHEELS
-        for i, stats in enumerate(self._wheel_stats(weights)):
-            if stats[0] >= self._min_wheel_samples:
-                low[i], high[i] = max(0.0, stats[1]), stats[2]
-        return low, high
-
-    def _wheel_stats(self, weights: np.ndarray | None) -> tuple[tuple[float, ...], ...]:
-        """`_wheel_stats_numpy` of the window's newest `excitation_window_s` (compiled when built:
-        on the window's columns and the weights `fit_window` left there; `weights` is not used)."""
-        w = self._window
-        o = self.options
-        if self.core is not None:
-            return self.core.recent_wheel_stats(w.slip, w.core_columns, w.start, w.end, self._recent_threshold,
-                                                self._runaway_lag, o.excitation_runaway_elasticity)
-        lo = w.start + self._recent_start(weights)
-        args = (w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end], w.time[lo:w.end], self._runaway_lag,
-                self.options.excitation_runaway_elasticity)
-        return _wheel_stats_numpy(*args)
-
-    def _recent_start(self, weights: np.ndarray) -> int:
-        """Index of the first window sample weighted above the excitation window's threshold
-        (the newest `excitation_window_s`); the weights rise along the window."""
-        return int(weights.searchsorted(self._recent_threshold, side="right"))
-
-    def _fit_at_high_slip(self, speed: float) -> np.ndarray:
-        """The fitted μ of each wheel at the high end of its recent slips."""
-        lam_hi = [s if math.isfinite(s) else 1e-3 for s in self._slip_support]
-        if self.core is not None:   # (braking_mu_and_partials_few's compiled call, without its arrays)
-            _, theta_list, shared = self._floats_of_x()
-            return self.core.mu_partials_few(lam_hi, max(speed, 1.0), theta_list, shared)[0]
-        mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
-        return mu
-
-    def _excitation(self, weights: np.ndarray, wheel_mu: np.ndarray, wheel_lam: np.ndarray, speed: float = 10.0) -> float:
-        """0 unless some wheel's recent data show the peak; rises to 1 as they reach it.
-
-        Two independent pieces of evidence must agree, so that the fit cannot talk itself into
-        excitation by moving its peak onto the data (constant-slip braking would do that):
-        (1) the data come near the fitted peak (slip ≥ `excitation_slip_ratio`·λ*, or utilised μ
-            near μ_max), and
-        (2) the wheel is at its limit by a measure that does not come from the fit: the data
-            themselves bend over — a through-origin quadratic μ ≈ aλ + bλ² fitted to the wheel's
-            recent samples has, at the high-slip end, a tangent slope below half its secant
-            slope, which a linear region never does — and, until this stop has shown its peak
-            once, an ABS works the wheel (its controller released it: `abs_activity`) or the
-            wheel ran away into slip, its force no longer following, and ran on towards lock-up
-            (firm braking below the peak bends the data too: tyre curves bend well before their
-            peak).
-        Once shown, a wheel held past the fitted peak at its grip stays excited (ABS holding
-        an ice plateau at nearly constant slip, where the bending has no spread to work on).
-        No excitation at all while one wheel's data contradict the fitted curve (μ still rising
-        at slips well past that wheel's fitted peak).
-        """
-        o = self.options
-        # Only the newest ABS cycles count: after a change of road the older samples describe
-        # the old one.
-        wheel_stats = self._wheel_stats(weights)
-        fit_at_hi = self._fit_at_high_slip(speed)
-        # The peak, once seen in this stop, describes the road at the speed it was seen at: the
-        # peak moves with speed (more grip at walking pace on most roads), so a wheel "held past
-        # it" at a much lower speed proves nothing until the data show the peak there again.
-        peak_seen = (self._peak_seen_speed > 0.0
-                     and speed >= o.peak_evidence_speed_ratio * self._peak_seen_speed)
-        # A θ held at its bound is not where the data put it: its peak proves nothing.
-        at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
-                    zip(self._floats_of_x()[0][:N_WHEELS], self._theta_bounds)]
-        best = best_fresh = 0.0
-        contradicted = False
-        why = self._excitation_why = ["", "", "", ""]
-        for i in range(N_WHEELS):
-            if at_bound[i]:
-                why[i] = "θ at its bound"
-                continue
-            abs_working = self._last_sample_s - self._abs_seen_s[i] <= o.excitation_window_s
-            why[i], proximity, fresh = self._wheel_verdict(
-                i, wheel_stats[i], float(wheel_mu[i]), float(wheel_lam[i]), float(fit_at_hi[i]),
-                bool(self._capped is not None and self._capped[i]), speed, peak_seen, abs_working)
-            contradicted = contradicted or proximity == CONTRADICTED
-            best = max(best, proximity)
-            if proximity >= o.excitation_slip_ratio:
-                self._wheel_shown_s[i] = self._last_sample_s
-            if fresh:
-                best_fresh = max(best_fresh, proximity)
-        if best < o.excitation_slip_ratio:
-            return 0.0
-        if best_fresh >= o.excitation_slip_ratio:
-            self._peak_seen_speed = speed
-        if contradicted:
-            return 0.0
-        return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
-
-    def _wheel_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float, fit_at_hi: float,
-                       capped: bool, speed: float, peak_seen: bool, abs_working: bool) -> tuple[Any, float, bool]:
-        """One wheel's evidence of its peak: (reason, proximity to the peak, fresh).
-
-        `fresh` is False for the one verdict that only carries earlier evidence on (a wheel held
-        past the peak seen before), True where these data show the peak themselves.
-        """
-        o = self.options
-        n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = stats
-        if n < self._min_wheel_samples:
-            return "few samples", 0.0, True
-        if not peak_seen and not abs_working:
-            # Over its peak a tyre gives no more force as the brake torque rises: the wheel
-            # runs away into slip (ABS exists to catch this). Steady braking, however bent its
-            # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
-            # release bends them more), moves the slip slowly.
-            # Growth over ~50 ms (`_runaway_lag` samples): beyond the slip noise, within an ABS
-            # cycle; and the force no longer following it: Δμ/μ ≤ elasticity·Δλ/λ. The pedal
-            # applied briskly moves the slip as fast in the linear region (0.3 /s at 65 % of
-            # the grip on wet), but there μ rises in proportion.
-            # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
-            # And in sliding speed, not only in slip: at walking pace the speed estimate's noise,
-            # divided by a small speed, makes slip "grow" at rates a runaway shows at speed. Past
-            # its peak a wheel decelerates faster than the car by (T_brake − R·F_peak)·R/J; with
-            # F_z·R²/J ≈ 25 g per unit of μ on cars, 1.5 μ·g is a brake torque 6 % past the peak.
-            needed = max(min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi),
-                         o.excitation_runaway_decel * GRAVITY_MPS2 * max(mu_hi, 0.0) / max(speed, 1.0))
-            if not self._runaway_confirmed(wheel, runaway_rate >= needed, lam_hi):
-                return "slip not running away", 0.0, True
-        if lam_hi * speed < o.excitation_min_sliding_mps:
-            # Slip is a speed difference over the speed: at walking pace a few quanta of the
-            # wheel-speed signals (0.01–0.06 km/h each) and the speed estimate's error make
-            # several % of slip. A sliding speed that small is not measured, whatever the ratio.
-            return "sliding too slow", 0.0, True
-        # An ABS working the wheel is evidence of the limit by itself (it releases the pressure
-        # the driver still demands), but the shape tests below still read the curve from the
-        # spread of the slips: a slip controller holding its target to ±1 % leaves them nothing
-        # but noise, and one of its verdicts passing at random would claim a peak that may lie
-        # at twice that slip.
-        needed_spread = o.abs_min_slip_spread if abs_working else o.min_slip_spread
-        spread = lam_hi >= o.excitation_min_slip and (lam_hi - lam_lo) >= needed_spread * lam_hi
-        if not spread:
-            # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
-            # ice): the shape of the curve near its peak is not observed ...
-            if (peak_seen and self._shape_showed_peak[wheel] and lam_hi >= o.excitation_min_slip
-                    and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star):
-                # ... unless this stop's data have shown the peak already, this wheel's own last
-                # slips with spread said so, and the wheel now stays past it, using the grip the
-                # fit says is there (ABS holding a wheel on an ice plateau): the peak is still
-                # being used, not left behind. (Where the wheel's slips last spread its data were
-                # still rising, the fit's peak under a held slip is where the fit put it, free
-                # to: a slip target short of the peak leaves nothing to locate it.)
-                return ("past the peak ({:.2f})", lam_lo / lam_star), 1.0, False
-            return "no slip spread", 0.0, True
-        verdict = self._shape_verdict(wheel, stats, mu_star, lam_star, fit_at_hi, capped)
-        self._shape_showed_peak[wheel] = verdict[1] >= o.excitation_slip_ratio
-        return verdict
-
-    def _shape_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float,
-                       fit_at_hi: float, capped: bool) -> tuple[Any, float, bool]:
-        """`_wheel_verdict` for a wheel whose slips spread: what the shape of its μ–slip data says."""
-        o = self.options
-        n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = stats
-        # (With an ABS too: a deceleration-triggered ABS releases a soft tyre at half its grip,
-        # by its own thresholds; only the data bending over show the tyre itself near its peak.)
-        bent = self._bending(lam_hi, s2, s3, s4, y1, y2)
-        if bent is not None:
-            return bent, 0.0, True
-        elasticity = self._top_elasticity(wheel)
-        if elasticity is None:
-            return "too few samples at the top slips", 0.0, True
-        if elasticity > o.flat_elasticity:
-            if elasticity > o.contradiction_elasticity and lam_hi > o.contradiction_slip_ratio * lam_star:
-                # μ still rising clearly (twice the flat threshold) at slips well past where the
-                # fit puts this wheel's peak: the fitted curve is not the tyre's, and no wheel's
-                # proximity to its peak can be read from it (a relaxing tyre's loops, a fit whose
-                # peak moved onto the data of another wheel).
-                return ("rising past the fitted peak ({:.2f})", elasticity), CONTRADICTED, True
-            # The quadratic's bend is a shape over all the slips; the test of the peak is local:
-            # at its peak a tyre's μ stops rising with slip. Under an ABS that releases below the
-            # peak (a wheel-deceleration trigger on a soft tyre, a slip target short of a snow
-            # curve's peak) the top slips still show μ rising at 0.4–0.7 of its secant.
-            return ("still rising ({:.2f})", elasticity), 0.0, True
-        if mu_hi > o.max_peak_secant * lam_hi:
-            # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
-            # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
-            return "steep secant", 0.0, True
-        # How close to the fitted peak the data came: in slip, in measured μ, and in the
-        # fitted curve's own height at the data's high slip (on a flat-topped road the
-        # peak slip is ill-defined but μ_max is not: the curve is already at its plateau).
-        fit_ratio = fit_at_hi / max(mu_star, 1e-6)
-        by_plateau = o.excitation_slip_ratio + (fit_ratio - o.excitation_fit_ratio) / (
-            1.0 - o.excitation_fit_ratio) * (1.0 - o.excitation_slip_ratio)
-        if capped:
-            # μ_max was read at the extrapolation limit, not at a peak: only a plateau
-            # (the fitted curve already flat where the data are) counts as evidence.
-            proximity = by_plateau
-        else:
-            proximity = max(lam_hi / lam_star, mu_hi / mu_star * o.excitation_slip_ratio / o.excitation_mu_ratio,
-                            by_plateau)
-        if mu_hi < o.min_utilisation * mu_star:
-            # The measured utilisation never came near the claimed peak: whatever the fit
-            # says beyond the data is extrapolation.
-            return "low utilisation", 0.0, True
-        if lam_star >= 0.9 * MAX_MODEL_SLIP and fit_ratio < o.excitation_fit_ratio:  # (uncapped)
-            return "no peak", 0.0, True   # no peak short of lock, and the data far below the fitted maximum
-        return ("proximity {:.2f}", proximity), proximity, True
-
-    def _runaway_confirmed(self, wheel: int, running_away: bool, lam_hi: float) -> bool:
-        """Whether the wheel's runaway is a real one (`_follow_runaways`). A slip that grows
-        fast for a moment and then stays is the linear region's transient: a tyre with
-        relaxation lags the slip as the pedal goes down, and its force seems not to follow."""
-        o = self.options
-        state = self._runaway[wheel]
-        if self._last_sample_s - state.since_s <= o.runaway_confirm_s:
-            return state.confirmed
-        if running_away:
-            self._runaway[wheel] = _Runaway(self._last_sample_s, lam_hi)
-        return False
-
-    def _follow_runaways(self, now_s: float, slips: Sequence[float]) -> None:
-        """Per sample, each wheel with an unconfirmed runaway. Past its peak, with the brake
-        torque above what the road can take, the slip runs on towards lock-up until the torque
-        falls: running on to twice the slip reached (and by `runaway_confirm_slip`) confirms
-        it. Nothing else does: a slip that falls back while the force holds is what a relaxing
-        tyre shows after the pedal's application (its force catching up with a slip that
-        overshot), as much as a wheel released from past its peak; an ABS release is evidence
-        of its own (`abs_activity`)."""
-        o = self.options
-        for i in range(N_WHEELS):
-            state = self._runaway[i]
-            if state.confirmed or now_s - state.since_s > o.runaway_confirm_s:
-                continue
-            slip = slips[i]
-            if slip >= max(2.0 * state.reached, state.reached + o.runaway_confirm_slip):
-                state.confirmed = True
-
-    def _top_elasticity(self, wheel: int) -> float | None:
-        """The wheel's local elasticity (dμ/dλ)·λ̄/μ̄ over the top half of its slips of the newest
-        `flat_window_s`: a least-squares slope over the samples between the median slip and the
-        95 % quantile (the single highest are noise and runaway), None without enough of them.
-
-        1 on a linear flank, ≈ 0 at the peak, < 0 past it. At 90 % of the peak the tangent is
-        about a third of the secant: median 0.36 over Magic Formula shapes (B 4–14, C 1.2–2.5,
-        E −1…0.9) and Burckhardt's roads, 0.54 at 80 % (0.27–0.68).
-        """
-        o = self.options
-        w = self._window
-        args = (w.slip, w.mu, w.wheel, w.time, w.start, w.end, self._last_sample_s - o.flat_window_s, wheel,
-                o.flat_min_samples, max(4, o.flat_min_samples // 2))
-        if self.core is not None:
-            return self.core.top_elasticity(*args)
-        return _top_elasticity_numpy(*args)
-
-    @staticmethod
-    def _bending(lam_hi: float, s2: float, s3: float, s4: float, y1: float, y2: float) -> Any:
-        """None when the wheel's recent μ–slip data bend over (the through-origin quadratic's
-        tangent at the high slip below half its secant), else why not."""
-        det = s2 * s4 - s3 * s3
-        if det <= 1e-18 * max(s2 * s4, 1e-300):
-            return "degenerate"
-        a = (y1 * s4 - y2 * s3) / det
-        b = (s2 * y2 - s3 * y1) / det
-        secant = a + b * lam_hi
-        if secant <= 0:
-            return "negative secant"
-        bending = (a + 2 * b * lam_hi) / secant
-        if bending > 0.5:
-            return ("not bending ({:.2f})", bending)
-        return None
 
     def _hold(self, now_s: float, speed: float, fitted: tuple | None = None) -> FrictionEstimate:
         """No fresh excitation: keep a recent VALID for `hold_s`, then say NOT_EXCITED."""
@@ -1739,11 +1175,6 @@ class LugreTrustRegionEstimator:
         value, _ = mu_and_jacobian_theta(slip, np.full_like(slip, speed_mps), np.full_like(slip, theta), p, ("theta",))
         return value
 
-    @property
-    def excitation_reasons(self) -> list[str]:
-        """Why each wheel counts as excited or not at the last excitation check (for diagnosis:
-        formatted when asked for, not on every check)."""
-        return [why if isinstance(why, str) else why[0].format(why[1]) for why in self._excitation_why]
 
     @property
     def parameters(self) -> dict[str, float]:

@@ -9,7 +9,8 @@ import pytest
 
 from frictiond import tyre_model as tm
 from frictiond.baseline_rls import BurckhardtRLSEstimator, burckhardt_peak
-from frictiond.estimator import CONTRADICTED, LugreTROptions, LugreTrustRegionEstimator
+from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
+from frictiond.peak_evidence import CONTRADICTED
 from frictiond.samples import FrictionEstimate, PhysicalSample, Status
 
 
@@ -283,7 +284,7 @@ def test_slow_refreshes_run_at_any_excitation_cadence(every):
 
 
 def test_quantile_pair_matches_numpy():
-    from frictiond.estimator import _quantile_pair
+    from frictiond.peak_evidence import _quantile_pair
     rng = np.random.default_rng(3)
     for n in (1, 2, 3, 10, 11, 57, 300):
         for _ in range(20):

@@ -295,7 +295,7 @@ def test_compiled_peaks_refuse_bad_arguments():
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
 @pytest.mark.parametrize("m, lag", [(0, 5), (3, 5), (7, 2), (40, 5), (400, 5), (401, 13)])
 def test_compiled_wheel_stats_match_numpy(m, lag):
-    from frictiond.estimator import _wheel_stats_numpy
+    from frictiond.peak_evidence import _wheel_stats_numpy
 
     rng = np.random.default_rng(m + lag)
     slip = rng.uniform(0.001, 0.3, m)
@@ -586,7 +586,7 @@ def _random_window(rng, cap: int, n_max: int, decimals: int, wheels: int = 4):
 def test_data_peaks_compiled_equals_numpy():
     # Random windows, slips rounded so that ties occur (numpy's stable order must be kept), some
     # wheels with too few samples, margins and group sizes as configured and beyond.
-    from frictiond.estimator import _data_peaks_numpy
+    from frictiond.estimate_confidence import _data_peaks_numpy
 
     rng = np.random.default_rng(11)
     for trial in range(300):
@@ -602,7 +602,7 @@ def test_data_peaks_compiled_equals_numpy():
 def test_top_elasticity_compiled_equals_numpy():
     # Random windows: some wheels with too few samples, slips with ties (a quantile on a tie),
     # since before, inside and after the window.
-    from frictiond.estimator import _top_elasticity_numpy
+    from frictiond.peak_evidence import _top_elasticity_numpy
 
     rng = np.random.default_rng(12)
     defined = 0

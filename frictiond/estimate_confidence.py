@@ -1,0 +1,242 @@
+"""How far a published μ_max can be trusted: the estimator's confidence and its vetoes.
+
+The confidence is the probability that μ_max is within `confidence_band` of the road's, from the
+fit's spread, its drift, the model mismatch and the mismatch the data measure; the vetoes keep a
+μ_max below the grip the car or its wheels measured, or resting on wheels that have not shown their
+peak, from being VALID. `EstimateConfidence` is a part of `LugreTrustRegionEstimator`.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from . import input_quality
+from .samples import WHEELS
+
+N_WHEELS = len(WHEELS)
+# Bands of slip, as multiples of a wheel's fitted peak slip, in which `_excess_over_fit` averages
+# the data's excess over the fitted curve: narrow around the peak, wider past it.
+_MISFIT_SLIP_BANDS = np.array([0.5, 0.75, 0.9, 1.1, 1.4, 2.0, 3.0])
+
+
+def _data_peaks_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, k: int, min_samples: int,
+                      margin: float) -> list[float]:
+    """`LugreTrustRegionEstimator._data_peaks`'s statistics on the samples given (time order);
+    `_fitcore.data_peaks` is the same, compiled."""
+    out = [0.0] * N_WHEELS
+    # All wheels at once (a handful of numpy calls, not a handful per wheel): the samples in
+    # (wheel, slip) order, each wheel's first n − n mod k of them in groups of k.
+    order = np.lexsort((slip, wheel))
+    counts = np.bincount(wheel.astype(np.intp), minlength=N_WHEELS)[:N_WHEELS]
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    used = np.where(counts >= max(k, min_samples), counts - counts % k, 0)
+    if not used.any():
+        return out
+    picks = np.concatenate([order[a:a + u] for a, u in zip(starts.tolist(), used.tolist()) if u])
+    groups = mu[picks].reshape(-1, k)
+    means = groups.mean(axis=1)
+    spread = np.sqrt(((groups - means[:, None]) ** 2).sum(axis=1) / (k - 1))
+    lower = means - 2.0 * spread / math.sqrt(k)
+    first = 0
+    for i, u in enumerate(used.tolist()):
+        if u:
+            out[i] = max(0.0, float(lower[first:first + u // k].max()) * (1.0 - margin))
+            first += u // k
+    return out
+
+
+class EstimateConfidence:
+    """The confidence of a fit's μ_max, and what bars it from VALID whatever its confidence."""
+
+    def _data_peaks(self) -> list[float]:
+        """Per wheel, the highest μ its newest samples (`excitation_window_s`) show with
+        confidence; 0 without enough of them.
+
+        The samples in slip order, in groups of `peak_group_samples` neighbours: each group's
+        mean μ less twice its standard error; the highest of these. Means over neighbouring slips
+        average the noise of the wheel-acceleration filter (several % of μ on dry asphalt under
+        ABS) that a single high sample carries; the two standard errors cover the maximum over
+        a few groups picking the noisiest.
+        """
+        o = self.options
+        w = self._window
+        k = o.peak_group_samples
+        out = [0.0] * N_WHEELS
+        if k <= 1 or len(w) < k or self._last_sample_s - self._event_start_s < o.measured_peak_settle_s:
+            # (Early in a stop a wheel's μ carries the brake gain's error, ±20 %, until the front
+            # end's body-equation check has corrected it: then it bounds nothing.)
+            return out
+        lo = int(w.time[w.start:w.end].searchsorted(self._last_sample_s - o.excitation_window_s)) + w.start
+        if self.core is not None:
+            return self.core.data_peaks(w.slip, w.mu, w.wheel, lo, w.end, k, self._min_wheel_samples,
+                                        o.measured_peak_margin)
+        return _data_peaks_numpy(w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end], k, self._min_wheel_samples,
+                                 o.measured_peak_margin)
+
+    def _body_floor(self, now_s: float) -> float:
+        """The least μ_max the car's own deceleration allows: the highest utilisation it showed
+        over the last `body_floor_window_s` (each a mean over `body_floor_smoothing_s`), less the
+        accelerometer's margins; 0 without such data. The load-weighted μ_max bounds the total
+        tyre force over the weight: Σ μ_i F_N,i / Σ F_N,i ≤ Σ μ_max,i F_N,i / Σ F_N,i."""
+        o = self.options
+        best = self._body_mu.maximum(now_s - o.body_floor_window_s)
+        return 0.0 if best is None else self._less_accelerometer_margins(best)
+
+    def _less_accelerometer_margins(self, body_mu: float) -> float:
+        """A body utilisation less what the accelerometer's offset and the car's pitch may add."""
+        o = self.options
+        return body_mu * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
+
+    def _barred_from_valid(self, now_s: float, mu_max: float, wheel_mu: Sequence[float]) -> bool:
+        """Whether μ_max may not be VALID whatever its confidence: below the stop's floor, from a
+        model that misfits the tyre (`_misfit`), or leaning on wheels that have not shown their
+        peak (`_leans_on_unshown_wheels`)."""
+        return (mu_max < self._stop_floor() or self._misfit(now_s)
+                or self._leans_on_unshown_wheels(now_s, wheel_mu))
+
+    def _leans_on_unshown_wheels(self, now_s: float, wheel_mu: Sequence[float]) -> bool:
+        """Whether μ_max depends on the peaks of wheels whose data have not shown them lately.
+
+        μ_max is the load-weighted mean of the four wheels' peaks; excitation needs only one
+        wheel at its peak. On one road the others' fits follow it (they share the road), but on
+        split μ a wheel on the grippy side, its slip held far below its peak (a slip target
+        short of a cobblestone's peak at 0.4), contributes an extrapolation: VALID with a mean
+        as wrong as that. So μ_max is compared with the mean the shown wheels' peaks alone give.
+        """
+        o = self.options
+        hold = o.wheel_evidence_hold_s
+        shown = [now_s - t <= hold for t in self._wheel_shown_s]
+        if all(shown) or not any(shown):
+            return False
+        share = self._load_share
+        shown_weight = sum(w for w, s in zip(share, shown) if s)
+        reference = sum(w * m for w, m, s in zip(share, wheel_mu, shown) if s) / max(shown_weight, 1e-9)
+        total = max(sum(share), 1e-9)
+        published = sum(w * m for w, m in zip(share, wheel_mu)) / total
+        if_shown = sum(w * (m if s else reference) for w, m, s in zip(share, wheel_mu, shown)) / total
+        return abs(published - if_shown) > o.unshown_wheel_tolerance * max(if_shown, 1e-6)
+
+    def _misfit(self, now_s: float) -> bool:
+        """Whether `misfit_changes` changes of road were detected within `misfit_window_s`. A real
+        change shows at most twice in a few seconds, once per axle a wheelbase apart; more often,
+        the newest residuals' bias is the static model not describing this tyre (a sharp peak the
+        wheels pass in a few ms, a tyre whose force lags its slip): its μ_max is not VALID."""
+        times = self._jump_times
+        while times and now_s - times[0] > self.options.misfit_window_s:
+            times.popleft()
+        return self.options.misfit_changes > 0 and len(times) >= self.options.misfit_changes
+
+    def _stop_floor(self) -> float:
+        """The least μ_max the car's highest utilisation since this stop (or road) began allows,
+        with the tolerance of a fit that rounds a sharp peak: a fit below it has forgotten the
+        peak the car used (the wheels held deep in slip since), so its μ_max is not VALID."""
+        return self._less_accelerometer_margins(self._body_mu.highest) * (1.0 - self.options.stop_floor_tolerance)
+
+    def _confidence(self, now_s: float, mu_max: float, mu_std: float, excitation: float) -> float:
+        """0…1: the probability that μ_max is within `confidence_band` of the road's, as far as
+        these data tell.
+
+        The Gauss–Newton covariance alone measures noise, not model mismatch. Combined here: the
+        delta-method spread of μ_max (from the residuals' own size), the drift of μ_max over the
+        last `drift_window_s` (an estimate still moving is not settled), a floor for model
+        mismatch, the excitation, a ramp over the first `settle_s` of excitation (the first fits
+        after onset are the worst), and the bias of the newest residuals (a road changing under
+        the fit), and how far the data rise above the fitted curve (`_excess_over_fit`).
+        """
+        o = self.options
+        history = self._mu_history
+        history.append((now_s, mu_max))
+        while history and history[0][0] < now_s - o.drift_window_s - 0.05:
+            history.popleft()
+        if excitation <= 0.0:
+            if now_s - self._excited_since_s > 0.5:
+                self._excited_since_s = math.inf
+            return 0.0
+        if self._excited_since_s == math.inf or now_s < self._excited_since_s:
+            self._excited_since_s = now_s
+        # The reference is the median of the fits around `drift_window_s` ago (± a sixth of it),
+        # not the single oldest one: a fit that dipped for a cycle (an ABS release, 6 % on MF
+        # ice) would otherwise cost the confidence twice, when it happens and again a drift
+        # window later as the reference, making a settled estimate CONVERGING for a cycle.
+        since = now_s - o.drift_window_s * (7.0 / 6.0)
+        reference = (self.core.drift_reference(history, since, o.drift_window_s / 3.0) if self.core is not None
+                     else None)
+        if reference is None:
+            values: list[float] = []
+            until = math.inf
+            for t, m in history:     # (ascending times)
+                if t < since:
+                    continue
+                if not values:
+                    until = t + o.drift_window_s / 3.0
+                elif t > until:
+                    break
+                values.append(m)
+            values.sort()
+            reference = values[len(values) // 2]   # (never empty: this fit was just appended)
+        scale = max(mu_max, 0.05)
+        drift = abs(mu_max - reference) / scale
+        rel_std = mu_std * self._residual_scale / scale if math.isfinite(mu_std) else 10.0
+        # The error's σ: the delta-method spread, the drift and the floor. The spread counts the
+        # samples as independent evidence of the peak; they are not: a static model's misfit of a
+        # tyre (a sharp peak rounded off, a force lagging its slip) repeats over each ABS cycle,
+        # and more samples of the same cycles do not shrink it. On the randomised campaign's
+        # independent truths the error is 4–6 times that spread, 4 with wheel speeds at 50 Hz and
+        # 6 at 100 Hz: √(`evidence_interval_s` / sample period).
+        spread2 = (self._variance_inflation * rel_std * rel_std + drift**2 + o.model_mismatch**2
+                   + (o.misfit_peak_ratio * self._data_above_fit)**2)
+        ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
+        # Newest residuals biased beyond the noise: the road may be changing under the fit.
+        excess = max(0.0, self._innovation_score - o.jump_threshold)
+        innovation = math.exp(-excess * excess / 8.0)
+        # (σ is 0 only with `model_mismatch` configured to 0 and a fit without spread or drift)
+        within_band = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
+        confidence = excitation * ramp * innovation * within_band
+        confidence *= input_quality.confidence_factor(self._input_share)
+        return confidence if math.isfinite(confidence) else 0.0
+
+    def _excess_over_fit(self, fitted_mu: Sequence[float], wheel_mu: Sequence[float],
+                         wheel_lam: Sequence[float]) -> float:
+        """How far the window's data rise above the curve published, as a share of its peak: the
+        largest mean of (μ_measured − μ_fit − lift)/μ_max,wheel over the samples of a band of slips
+        (relative to the wheel's fitted peak slip, from half of it up) with `misfit_bin_samples`
+        or more; 0 if none.
+
+        Where the tyre gave more than the curve says, its peak is higher than the curve's: the
+        static model rounding off a sharp peak (a Magic Formula tyre that
+        falls 30 % past it, an ABS dwelling deep in slip pulling the fit down to the plateau)
+        shows here, as a band of slips the fit passes under on every ABS cycle. The spread of
+        μ_max cannot show it (the samples agree with each other), the model-mismatch floor is
+        the same for every tyre: this is the mismatch the data measure. The excess is largest at
+        the tyre's peak and falls to nothing at the band's edges: its mean over a band is about
+        half its top (`misfit_peak_ratio`). The lift is how far the published peak was raised above
+        the fitted one (by the wheel's measured peak or the car's deceleration): that much of
+        the excess is already answered.
+        """
+        w = self._window
+        lo, hi = w.start, w.end
+        if hi - lo < self.options.misfit_bin_samples:
+            return 0.0
+        if self.core is not None:
+            sw = w.scratch[3, lo:hi]
+            model_minus_data = np.divide(w.scratch[0, lo:hi], sw, out=np.zeros(hi - lo), where=sw > 0)
+        elif self._numpy_residuals is not None and len(self._numpy_residuals) == hi - lo:
+            model_minus_data = self._numpy_residuals
+        else:
+            return 0.0
+        wheel = w.wheel[lo:hi]
+        published = np.maximum(np.asarray(wheel_mu, dtype=float), 1e-3)
+        lift = published - np.asarray(fitted_mu, dtype=float)
+        peak_mu = published[wheel]
+        peak_slip = np.maximum(np.asarray(wheel_lam, dtype=float), 1e-3)[wheel]
+        band = np.searchsorted(_MISFIT_SLIP_BANDS, w.slip[lo:hi] / peak_slip, side="right")
+        excess = (-model_minus_data - lift[wheel]) / peak_mu
+        counts = np.bincount(band, minlength=len(_MISFIT_SLIP_BANDS) + 1)
+        sums = np.bincount(band, weights=excess, minlength=len(_MISFIT_SLIP_BANDS) + 1)
+        full = counts >= self.options.misfit_bin_samples
+        full[0] = False   # (below half the peak slip: the slip stiffness and the pedal's transient, not the peak)
+        if not full.any():
+            return 0.0
+        return max(0.0, float((sums[full] / counts[full]).max()))

@@ -1,0 +1,379 @@
+"""Whether the data show the tyre's peak: the estimator's excitation evidence.
+
+A static fit always has a peak; whether the data located it is a separate question, answered
+here from the data themselves (slips near the fitted peak, the μ–slip curve bending over and
+flat at its top, a wheel running away into slip, an ABS working the wheel) and never from the
+fit alone. `PeakEvidence` is a part of `LugreTrustRegionEstimator` (its window, options and fit
+state are the estimator's); the numpy reference implementations of the compiled statistics sit
+beside it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from .samples import WHEELS
+from .tyre_model import MAX_MODEL_SLIP, braking_mu_and_partials_few
+from .vehicle import GRAVITY_MPS2
+
+N_WHEELS = len(WHEELS)
+# A wheel verdict's proximity when the wheel's data contradict the fitted curve (`_wheel_verdict`).
+CONTRADICTED = -1.0
+
+
+def _quantile_pair(values: np.ndarray, q_low: float, q_high: float) -> tuple[float, float]:
+    """`np.quantile(values, (q_low, q_high))` (linear method, finite values), by one partition."""
+    n = len(values)
+    picks = []
+    for q in (q_low, q_high):
+        virtual = (n - 1) * q
+        i = min(int(math.floor(virtual)), n - 1)
+        picks.append((i, virtual - i))
+    kth = sorted({min(k, n - 1) for i, _ in picks for k in (i, i + 1)})
+    part = np.partition(values, kth)
+    out = []
+    for i, t in picks:
+        if i >= n - 1:
+            out.append(float(part[n - 1]))
+            continue
+        a, b = float(part[i]), float(part[i + 1])
+        diff = b - a
+        out.append(b - diff * (1 - t) if t >= 0.5 else a + diff * t)
+    return out[0], out[1]
+
+def _wheel_stats_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, lag: int,
+                       elasticity: float) -> tuple[tuple[float, ...], ...]:
+    """Per wheel, over the samples given (time order), what the slip range and the excitation
+    test read from them: n; the 10 % and 90 % slip quantiles; the slips of order k_lo and k_hi
+    and the μ of order k_hi (k = max(1, n // 10) from each end); the fastest slip run-away over
+    `lag` samples whose force did not follow (Δμ/μ ≤ elasticity·Δλ/λ), −∞ without any; the
+    sums Σλ², Σλ³, Σλ⁴, Σλμ, Σλ²μ of the through-origin quadratic. `_fitcore.wheel_stats` is
+    the same, compiled."""
+    out = []
+    for i in range(N_WHEELS):
+        sel = wheel == i
+        n = int(np.count_nonzero(sel))
+        if n == 0:
+            out.append((0.0,) + (math.nan,) * 6 + (0.0,) * 5)
+            continue
+        lam, m, t = slip[sel], mu[sel], times[sel]
+        q_low, q_high = _quantile_pair(lam, 0.1, 0.9)
+        k_hi = max(0, n - 1 - max(1, n // 10))
+        k_lo = min(n - 1, max(1, n // 10))
+        ordered = np.partition(lam, (k_lo, k_hi))
+        mu_hi = float(np.partition(m, k_hi)[k_hi])
+        d_lam = lam[lag:] - lam[:-lag]
+        rate = d_lam / np.maximum(t[lag:] - t[:-lag], 1e-3)
+        rate[(m[lag:] - m[:-lag]) * lam[:-lag] > elasticity * d_lam * m[:-lag]] = 0.0
+        best = float(rate.max()) if len(rate) else -math.inf
+        lam2 = lam * lam
+        out.append((float(n), q_low, q_high, float(ordered[k_lo]), float(ordered[k_hi]), mu_hi, best,
+                    float(lam @ lam), float(lam @ lam2), float(lam2 @ lam2), float(lam @ m), float(lam2 @ m)))
+    return tuple(out)
+
+def _top_elasticity_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, start: int,
+                          end: int, since: float, wheel_i: int, min_n: int, min_upper: int) -> float | None:
+    """`LugreTrustRegionEstimator._top_elasticity` on the window's columns (the compiled
+    `top_elasticity`'s reference)."""
+    lo = int(times[start:end].searchsorted(since)) + start
+    mine = wheel[lo:end] == wheel_i
+    slips = slip[lo:end][mine]
+    if len(slips) < min_n or len(slips) < 1:
+        return None
+    mus = mu[lo:end][mine]
+    median, top = np.quantile(slips, (0.5, 0.95))
+    upper = (slips >= median) & (slips <= top)
+    if int(upper.sum()) < min_upper or not top - median >= 1e-4:
+        return None
+    ls, us = slips[upper], mus[upper]
+    l_mean, u_mean = float(ls.mean()), float(us.mean())
+    dl = ls - l_mean
+    slope = float(dl @ (us - u_mean)) / max(float(dl @ dl), 1e-12)
+    return slope * l_mean / max(u_mean, 1e-6)
+
+@dataclass(slots=True)
+class _Runaway:
+    """A wheel's latest runaway into slip, until confirmed or `runaway_confirm_s` old."""
+    since_s: float = -math.inf
+    reached: float = 0.0              # the slip it had reached when seen
+    confirmed: bool = False
+
+
+class PeakEvidence:
+    """The excitation: per wheel a verdict on whether its newest data show the peak, and the
+    stop-long evidence behind it (runaways, peaks shown, the wheels' last verdicts on spread slips)."""
+
+    def _slip_range(self, weights: np.ndarray | None) -> tuple[list[float], list[float]]:
+        """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
+        without data gets (0, ∞): no bound on either side."""
+        low = [0.0] * N_WHEELS
+        high = [math.inf] * N_WHEELS
+        for i, stats in enumerate(self._wheel_stats(weights)):
+            if stats[0] >= self._min_wheel_samples:
+                low[i], high[i] = max(0.0, stats[1]), stats[2]
+        return low, high
+
+    def _wheel_stats(self, weights: np.ndarray | None) -> tuple[tuple[float, ...], ...]:
+        """`_wheel_stats_numpy` of the window's newest `excitation_window_s` (compiled when built:
+        on the window's columns and the weights `fit_window` left there; `weights` is not used)."""
+        w = self._window
+        o = self.options
+        if self.core is not None:
+            return self.core.recent_wheel_stats(w.slip, w.core_columns, w.start, w.end, self._recent_threshold,
+                                                self._runaway_lag, o.excitation_runaway_elasticity)
+        lo = w.start + self._recent_start(weights)
+        args = (w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end], w.time[lo:w.end], self._runaway_lag,
+                self.options.excitation_runaway_elasticity)
+        return _wheel_stats_numpy(*args)
+
+    def _recent_start(self, weights: np.ndarray) -> int:
+        """Index of the first window sample weighted above the excitation window's threshold
+        (the newest `excitation_window_s`); the weights rise along the window."""
+        return int(weights.searchsorted(self._recent_threshold, side="right"))
+
+    def _fit_at_high_slip(self, speed: float) -> np.ndarray:
+        """The fitted μ of each wheel at the high end of its recent slips."""
+        lam_hi = [s if math.isfinite(s) else 1e-3 for s in self._slip_support]
+        if self.core is not None:   # (braking_mu_and_partials_few's compiled call, without its arrays)
+            _, theta_list, shared = self._floats_of_x()
+            return self.core.mu_partials_few(lam_hi, max(speed, 1.0), theta_list, shared)[0]
+        mu, _ = braking_mu_and_partials_few(lam_hi, max(speed, 1.0), self._thetas(self._x), self._params(self._x))
+        return mu
+
+    def _excitation(self, weights: np.ndarray, wheel_mu: np.ndarray, wheel_lam: np.ndarray, speed: float = 10.0) -> float:
+        """0 unless some wheel's recent data show the peak; rises to 1 as they reach it.
+
+        Two independent pieces of evidence must agree, so that the fit cannot talk itself into
+        excitation by moving its peak onto the data (constant-slip braking would do that):
+        (1) the data come near the fitted peak (slip ≥ `excitation_slip_ratio`·λ*, or utilised μ
+            near μ_max), and
+        (2) the wheel is at its limit by a measure that does not come from the fit: the data
+            themselves bend over — a through-origin quadratic μ ≈ aλ + bλ² fitted to the wheel's
+            recent samples has, at the high-slip end, a tangent slope below half its secant
+            slope, which a linear region never does — and, until this stop has shown its peak
+            once, an ABS works the wheel (its controller released it: `abs_activity`) or the
+            wheel ran away into slip, its force no longer following, and ran on towards lock-up
+            (firm braking below the peak bends the data too: tyre curves bend well before their
+            peak).
+        Once shown, a wheel held past the fitted peak at its grip stays excited (ABS holding
+        an ice plateau at nearly constant slip, where the bending has no spread to work on).
+        No excitation at all while one wheel's data contradict the fitted curve (μ still rising
+        at slips well past that wheel's fitted peak).
+        """
+        o = self.options
+        # Only the newest ABS cycles count: after a change of road the older samples describe
+        # the old one.
+        wheel_stats = self._wheel_stats(weights)
+        fit_at_hi = self._fit_at_high_slip(speed)
+        # The peak, once seen in this stop, describes the road at the speed it was seen at: the
+        # peak moves with speed (more grip at walking pace on most roads), so a wheel "held past
+        # it" at a much lower speed proves nothing until the data show the peak there again.
+        peak_seen = (self._peak_seen_speed > 0.0
+                     and speed >= o.peak_evidence_speed_ratio * self._peak_seen_speed)
+        # A θ held at its bound is not where the data put it: its peak proves nothing.
+        at_bound = [x - lb < 1e-6 or ub - x < 1e-6 for x, (lb, ub) in
+                    zip(self._floats_of_x()[0][:N_WHEELS], self._theta_bounds)]
+        best = best_fresh = 0.0
+        contradicted = False
+        why = self._excitation_why = ["", "", "", ""]
+        for i in range(N_WHEELS):
+            if at_bound[i]:
+                why[i] = "θ at its bound"
+                continue
+            abs_working = self._last_sample_s - self._abs_seen_s[i] <= o.excitation_window_s
+            why[i], proximity, fresh = self._wheel_verdict(
+                i, wheel_stats[i], float(wheel_mu[i]), float(wheel_lam[i]), float(fit_at_hi[i]),
+                bool(self._capped is not None and self._capped[i]), speed, peak_seen, abs_working)
+            contradicted = contradicted or proximity == CONTRADICTED
+            best = max(best, proximity)
+            if proximity >= o.excitation_slip_ratio:
+                self._wheel_shown_s[i] = self._last_sample_s
+            if fresh:
+                best_fresh = max(best_fresh, proximity)
+        if best < o.excitation_slip_ratio:
+            return 0.0
+        if best_fresh >= o.excitation_slip_ratio:
+            self._peak_seen_speed = speed
+        if contradicted:
+            return 0.0
+        return min(1.0, (best - o.excitation_slip_ratio) / 0.15 + 0.5)
+
+    def _wheel_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float, fit_at_hi: float,
+                       capped: bool, speed: float, peak_seen: bool, abs_working: bool) -> tuple[Any, float, bool]:
+        """One wheel's evidence of its peak: (reason, proximity to the peak, fresh).
+
+        `fresh` is False for the one verdict that only carries earlier evidence on (a wheel held
+        past the peak seen before), True where these data show the peak themselves.
+        """
+        o = self.options
+        n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = stats
+        if n < self._min_wheel_samples:
+            return "few samples", 0.0, True
+        if not peak_seen and not abs_working:
+            # Over its peak a tyre gives no more force as the brake torque rises: the wheel
+            # runs away into slip (ABS exists to catch this). Steady braking, however bent its
+            # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
+            # release bends them more), moves the slip slowly.
+            # Growth over ~50 ms (`_runaway_lag` samples): beyond the slip noise, within an ABS
+            # cycle; and the force no longer following it: Δμ/μ ≤ elasticity·Δλ/λ. The pedal
+            # applied briskly moves the slip as fast in the linear region (0.3 /s at 65 % of
+            # the grip on wet), but there μ rises in proportion.
+            # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
+            # And in sliding speed, not only in slip: at walking pace the speed estimate's noise,
+            # divided by a small speed, makes slip "grow" at rates a runaway shows at speed. Past
+            # its peak a wheel decelerates faster than the car by (T_brake − R·F_peak)·R/J; with
+            # F_z·R²/J ≈ 25 g per unit of μ on cars, 1.5 μ·g is a brake torque 6 % past the peak.
+            needed = max(min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi),
+                         o.excitation_runaway_decel * GRAVITY_MPS2 * max(mu_hi, 0.0) / max(speed, 1.0))
+            if not self._runaway_confirmed(wheel, runaway_rate >= needed, lam_hi):
+                return "slip not running away", 0.0, True
+        if lam_hi * speed < o.excitation_min_sliding_mps:
+            # Slip is a speed difference over the speed: at walking pace a few quanta of the
+            # wheel-speed signals (0.01–0.06 km/h each) and the speed estimate's error make
+            # several % of slip. A sliding speed that small is not measured, whatever the ratio.
+            return "sliding too slow", 0.0, True
+        # An ABS working the wheel is evidence of the limit by itself (it releases the pressure
+        # the driver still demands), but the shape tests below still read the curve from the
+        # spread of the slips: a slip controller holding its target to ±1 % leaves them nothing
+        # but noise, and one of its verdicts passing at random would claim a peak that may lie
+        # at twice that slip.
+        needed_spread = o.abs_min_slip_spread if abs_working else o.min_slip_spread
+        spread = lam_hi >= o.excitation_min_slip and (lam_hi - lam_lo) >= needed_spread * lam_hi
+        if not spread:
+            # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
+            # ice): the shape of the curve near its peak is not observed ...
+            if (peak_seen and self._shape_showed_peak[wheel] and lam_hi >= o.excitation_min_slip
+                    and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star):
+                # ... unless this stop's data have shown the peak already, this wheel's own last
+                # slips with spread said so, and the wheel now stays past it, using the grip the
+                # fit says is there (ABS holding a wheel on an ice plateau): the peak is still
+                # being used, not left behind. (Where the wheel's slips last spread its data were
+                # still rising, the fit's peak under a held slip is where the fit put it, free
+                # to: a slip target short of the peak leaves nothing to locate it.)
+                return ("past the peak ({:.2f})", lam_lo / lam_star), 1.0, False
+            return "no slip spread", 0.0, True
+        verdict = self._shape_verdict(wheel, stats, mu_star, lam_star, fit_at_hi, capped)
+        self._shape_showed_peak[wheel] = verdict[1] >= o.excitation_slip_ratio
+        return verdict
+
+    def _shape_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float,
+                       fit_at_hi: float, capped: bool) -> tuple[Any, float, bool]:
+        """`_wheel_verdict` for a wheel whose slips spread: what the shape of its μ–slip data says."""
+        o = self.options
+        n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = stats
+        # (With an ABS too: a deceleration-triggered ABS releases a soft tyre at half its grip,
+        # by its own thresholds; only the data bending over show the tyre itself near its peak.)
+        bent = self._bending(lam_hi, s2, s3, s4, y1, y2)
+        if bent is not None:
+            return bent, 0.0, True
+        elasticity = self._top_elasticity(wheel)
+        if elasticity is None:
+            return "too few samples at the top slips", 0.0, True
+        if elasticity > o.flat_elasticity:
+            if elasticity > o.contradiction_elasticity and lam_hi > o.contradiction_slip_ratio * lam_star:
+                # μ still rising clearly (twice the flat threshold) at slips well past where the
+                # fit puts this wheel's peak: the fitted curve is not the tyre's, and no wheel's
+                # proximity to its peak can be read from it (a relaxing tyre's loops, a fit whose
+                # peak moved onto the data of another wheel).
+                return ("rising past the fitted peak ({:.2f})", elasticity), CONTRADICTED, True
+            # The quadratic's bend is a shape over all the slips; the test of the peak is local:
+            # at its peak a tyre's μ stops rising with slip. Under an ABS that releases below the
+            # peak (a wheel-deceleration trigger on a soft tyre, a slip target short of a snow
+            # curve's peak) the top slips still show μ rising at 0.4–0.7 of its secant.
+            return ("still rising ({:.2f})", elasticity), 0.0, True
+        if mu_hi > o.max_peak_secant * lam_hi:
+            # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
+            # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
+            return "steep secant", 0.0, True
+        # How close to the fitted peak the data came: in slip, in measured μ, and in the
+        # fitted curve's own height at the data's high slip (on a flat-topped road the
+        # peak slip is ill-defined but μ_max is not: the curve is already at its plateau).
+        fit_ratio = fit_at_hi / max(mu_star, 1e-6)
+        by_plateau = o.excitation_slip_ratio + (fit_ratio - o.excitation_fit_ratio) / (
+            1.0 - o.excitation_fit_ratio) * (1.0 - o.excitation_slip_ratio)
+        if capped:
+            # μ_max was read at the extrapolation limit, not at a peak: only a plateau
+            # (the fitted curve already flat where the data are) counts as evidence.
+            proximity = by_plateau
+        else:
+            proximity = max(lam_hi / lam_star, mu_hi / mu_star * o.excitation_slip_ratio / o.excitation_mu_ratio,
+                            by_plateau)
+        if mu_hi < o.min_utilisation * mu_star:
+            # The measured utilisation never came near the claimed peak: whatever the fit
+            # says beyond the data is extrapolation.
+            return "low utilisation", 0.0, True
+        if lam_star >= 0.9 * MAX_MODEL_SLIP and fit_ratio < o.excitation_fit_ratio:  # (uncapped)
+            return "no peak", 0.0, True   # no peak short of lock, and the data far below the fitted maximum
+        return ("proximity {:.2f}", proximity), proximity, True
+
+    def _runaway_confirmed(self, wheel: int, running_away: bool, lam_hi: float) -> bool:
+        """Whether the wheel's runaway is a real one (`_follow_runaways`). A slip that grows
+        fast for a moment and then stays is the linear region's transient: a tyre with
+        relaxation lags the slip as the pedal goes down, and its force seems not to follow."""
+        o = self.options
+        state = self._runaway[wheel]
+        if self._last_sample_s - state.since_s <= o.runaway_confirm_s:
+            return state.confirmed
+        if running_away:
+            self._runaway[wheel] = _Runaway(self._last_sample_s, lam_hi)
+        return False
+
+    def _follow_runaways(self, now_s: float, slips: Sequence[float]) -> None:
+        """Per sample, each wheel with an unconfirmed runaway. Past its peak, with the brake
+        torque above what the road can take, the slip runs on towards lock-up until the torque
+        falls: running on to twice the slip reached (and by `runaway_confirm_slip`) confirms
+        it. Nothing else does: a slip that falls back while the force holds is what a relaxing
+        tyre shows after the pedal's application (its force catching up with a slip that
+        overshot), as much as a wheel released from past its peak; an ABS release is evidence
+        of its own (`abs_activity`)."""
+        o = self.options
+        for i in range(N_WHEELS):
+            state = self._runaway[i]
+            if state.confirmed or now_s - state.since_s > o.runaway_confirm_s:
+                continue
+            slip = slips[i]
+            if slip >= max(2.0 * state.reached, state.reached + o.runaway_confirm_slip):
+                state.confirmed = True
+
+    def _top_elasticity(self, wheel: int) -> float | None:
+        """The wheel's local elasticity (dμ/dλ)·λ̄/μ̄ over the top half of its slips of the newest
+        `flat_window_s`: a least-squares slope over the samples between the median slip and the
+        95 % quantile (the single highest are noise and runaway), None without enough of them.
+
+        1 on a linear flank, ≈ 0 at the peak, < 0 past it. At 90 % of the peak the tangent is
+        about a third of the secant: median 0.36 over Magic Formula shapes (B 4–14, C 1.2–2.5,
+        E −1…0.9) and Burckhardt's roads, 0.54 at 80 % (0.27–0.68).
+        """
+        o = self.options
+        w = self._window
+        args = (w.slip, w.mu, w.wheel, w.time, w.start, w.end, self._last_sample_s - o.flat_window_s, wheel,
+                o.flat_min_samples, max(4, o.flat_min_samples // 2))
+        if self.core is not None:
+            return self.core.top_elasticity(*args)
+        return _top_elasticity_numpy(*args)
+
+    @staticmethod
+    def _bending(lam_hi: float, s2: float, s3: float, s4: float, y1: float, y2: float) -> Any:
+        """None when the wheel's recent μ–slip data bend over (the through-origin quadratic's
+        tangent at the high slip below half its secant), else why not."""
+        det = s2 * s4 - s3 * s3
+        if det <= 1e-18 * max(s2 * s4, 1e-300):
+            return "degenerate"
+        a = (y1 * s4 - y2 * s3) / det
+        b = (s2 * y2 - s3 * y1) / det
+        secant = a + b * lam_hi
+        if secant <= 0:
+            return "negative secant"
+        bending = (a + 2 * b * lam_hi) / secant
+        if bending > 0.5:
+            return ("not bending ({:.2f})", bending)
+        return None
+
+    @property
+    def excitation_reasons(self) -> list[str]:
+        """Why each wheel counts as excited or not at the last excitation check (for diagnosis:
+        formatted when asked for, not on every check)."""
+        return [why if isinstance(why, str) else why[0].format(why[1]) for why in self._excitation_why]

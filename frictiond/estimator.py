@@ -966,16 +966,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         x = self._x
         x_list, theta_list, shared = self._floats_of_x()   # (shared: σ0, v_s, σ2 at 3, 5, 6)
         v_eval = max(speed, 1.0)
-        near = self._last_peak_slips
-        found = None
-        if self.core is not None and near is not None:
-            found = self.core.peaks_near(v_eval, theta_list, near, shared)
-            near = None   # (tried: what is left is the grid search)
-        if found is None:
-            grid_mu, grid_lam = peaks(v_eval, self._params(x), self._thetas(x), near=near)
-            found = (grid_mu.tolist(), grid_lam.tolist())
-        wheel_mu, wheel_lam = found
-        self._last_peak_slips = wheel_lam
+        wheel_mu, wheel_lam = self._fitted_peaks(v_eval, theta_list, shared)
         if self._due(0) or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(weights)
             self._measured_peaks = self._data_peaks()
@@ -986,25 +977,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         # noise floor is most of μ, and the fit is better than it)
         self._residual_scale = math.sqrt(min(residual_ss / dof, variance_factor) / variance_factor)
         if self._cov_unit is None or self._due(2):
-            # Parameters held at a bound are fixed there for the covariance: the unconstrained
-            # Gauss–Newton covariance would count spread into the infeasible side. Like the
-            # excitation, it changes slowly: refreshed every few fits.
-            if self.core is not None:
-                # (the same test in floats: seven numbers do not need numpy's per-call cost)
-                free_list = [v - lb > 1e-3 * (ub - lb) and ub - v > 1e-3 * (ub - lb)
-                             for v, lb, ub in zip(x_list, self._lb_list, self._ub_list)]
-                cov = np.empty((len(x), len(x)))
-                if not self.core.inverse_free(normal, free_list, cov):
-                    cov[:] = np.inf
-            else:
-                span = self._ub - self._lb
-                free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
-                cov = np.zeros((len(x), len(x)))
-                try:
-                    cov[np.ix_(free, free)] = np.linalg.inv(normal[np.ix_(free, free)])
-                except np.linalg.LinAlgError:
-                    cov[:] = np.inf
-            self._cov_unit = cov
+            self._cov_unit = self._unit_covariance(x_list, normal)
         args = (wheel_mu, wheel_lam, self._slip_support, self._slip_floor,
                 o.peak_extrapolation, o.extrapolation_max_slip, theta_list, v_eval)
         tail = (self._shared_scale, self._cov_unit, variance_factor, self._load_share)
@@ -1014,20 +987,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
             numbers = _peak_report_numpy(*args, self._params(x), *tail)
         wheel_mu, wheel_lam, self._capped, mu_max, slip_star, mu_std, wheel_std = numbers
         fitted_mu = wheel_mu
-        measured = self._measured_peaks
-        if self._innovation_score <= o.jump_threshold and any(m > f for m, f in zip(measured, wheel_mu)):
-            # A wheel's data rose above its fitted peak (a sharp peak the static model rounds
-            # off): no tyre gives less than it was just measured to give. (Not while the newest
-            # residuals say the road is changing: the grip measured may be the old road's.)
-            wheel_mu = tuple(max(m, f) for m, f in zip(measured, wheel_mu))
-            mu_max = sum(share * m for share, m in zip(self._load_share, wheel_mu))
-        floor = self._body_floor(now_s)
-        if mu_max < floor:
-            # The fit's peak lies below the grip the car has just used (a sharp peak the static
-            # model cannot follow, say): no road gives less than that. The wheels keep their split.
-            lift = floor / max(mu_max, 1e-6)
-            wheel_mu = tuple(m * lift for m in wheel_mu)
-            mu_max = floor
+        wheel_mu, mu_max = self._lifted_to_measured(now_s, wheel_mu, mu_max)
         # Excitation: how near the peak the data went, per wheel, from the newest samples.
         # Excitation moves on the time scale of ABS cycles (~0.1 s): evaluate it every few fits.
         if self._due(1) or self._excitation_cache is None:
@@ -1043,6 +1003,15 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         detail.update(zip(_WHEEL_STD_KEYS, map(float, wheel_std)))
         if excitation > 0:
             self._balance_axles(now_s, wheel_mu)
+        return self._decided(now_s, speed, excitation, confidence,
+                             (mu_max, slip_star, theta_mean, wheel_mu, mu_std, detail))
+
+    def _decided(self, now_s: float, speed: float, excitation: float, confidence: float,
+                 numbers: tuple) -> FrictionEstimate:
+        """The status of a fit's estimate (`numbers`: μ_max, λ*, mean θ, the wheels' μ_max, its
+        spread, the detail), from its excitation and confidence, and the VALID kept from before."""
+        o = self.options
+        mu_max, slip_star, theta_mean, wheel_mu, mu_std, detail = numbers
         # Hysteresis: an estimate that was VALID last cycle (and not since invalidated by a jump)
         # stays VALID down to `keep_valid_confidence`. A one-cycle dip just under the threshold
         # (the drift term reacting to a 5 % correction when an ABS cycle adds samples nearer the
@@ -1071,6 +1040,62 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
             self._last_valid = estimate
         return estimate
 
+    def _fitted_peaks(self, v_eval: float, theta_list: list[float], shared: tuple[float, ...]) -> tuple[list, list]:
+        """Each wheel's fitted peak (μ, λ) at speed `v_eval`: searched near the last ones when
+        the compiled fit can, else on the grid."""
+        near = self._last_peak_slips
+        found = None
+        if self.core is not None and near is not None:
+            found = self.core.peaks_near(v_eval, theta_list, near, shared)
+            near = None   # (tried: what is left is the grid search)
+        if found is None:
+            grid_mu, grid_lam = peaks(v_eval, self._params(self._x), self._thetas(self._x), near=near)
+            found = (grid_mu.tolist(), grid_lam.tolist())
+        wheel_mu, wheel_lam = found
+        self._last_peak_slips = wheel_lam
+        return wheel_mu, wheel_lam
+
+    def _unit_covariance(self, x_list: list[float], normal: np.ndarray) -> np.ndarray:
+        """(JᵀWJ)⁻¹ over the free parameters. Parameters held at a bound are fixed there: the
+        unconstrained Gauss–Newton covariance would count spread into the infeasible side. Like
+        the excitation, it changes slowly: refreshed every few fits."""
+        x = self._x
+        if self.core is not None:
+            # (the same test in floats: seven numbers do not need numpy's per-call cost)
+            free_list = [v - lb > 1e-3 * (ub - lb) and ub - v > 1e-3 * (ub - lb)
+                         for v, lb, ub in zip(x_list, self._lb_list, self._ub_list)]
+            cov = np.empty((len(x), len(x)))
+            if not self.core.inverse_free(normal, free_list, cov):
+                cov[:] = np.inf
+            return cov
+        span = self._ub - self._lb
+        free = (x - self._lb > 1e-3 * span) & (self._ub - x > 1e-3 * span)
+        cov = np.zeros((len(x), len(x)))
+        try:
+            cov[np.ix_(free, free)] = np.linalg.inv(normal[np.ix_(free, free)])
+        except np.linalg.LinAlgError:
+            cov[:] = np.inf
+        return cov
+
+    def _lifted_to_measured(self, now_s: float, wheel_mu: tuple, mu_max: float) -> tuple[tuple, float]:
+        """The wheels' peaks and μ_max raised to the grip measured: a wheel's own data, the car's
+        deceleration."""
+        o = self.options
+        measured = self._measured_peaks
+        if self._innovation_score <= o.jump_threshold and any(m > f for m, f in zip(measured, wheel_mu)):
+            # A wheel's data rose above its fitted peak (a sharp peak the static model rounds
+            # off): no tyre gives less than it was just measured to give. (Not while the newest
+            # residuals say the road is changing: the grip measured may be the old road's.)
+            wheel_mu = tuple(max(m, f) for m, f in zip(measured, wheel_mu))
+            mu_max = sum(share * m for share, m in zip(self._load_share, wheel_mu))
+        floor = self._body_floor(now_s)
+        if mu_max < floor:
+            # The fit's peak lies below the grip the car has just used (a sharp peak the static
+            # model cannot follow, say): no road gives less than that. The wheels keep their split.
+            lift = floor / max(mu_max, 1e-6)
+            wheel_mu = tuple(m * lift for m in wheel_mu)
+            mu_max = floor
+        return wheel_mu, mu_max
 
     def _restate(self, last: FrictionEstimate, now_s: float) -> FrictionEstimate:
         """The last (CONVERGING) fit again, at a cycle without usable samples.
@@ -1101,7 +1126,6 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         latency); every fit when `excitation_every` ≤ 1."""
         every = self.options.excitation_every
         return every <= 1 or self._fits % every == step % every
-
 
     def _axle_scale(self, wheel: int) -> float:
         """Correction of a wheel's utilised μ for the front/rear brake-gain split (see below)."""
@@ -1140,7 +1164,6 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
         self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
 
-
     def _hold(self, now_s: float, speed: float, fitted: tuple | None = None) -> FrictionEstimate:
         """No fresh excitation: keep a recent VALID for `hold_s`, then say NOT_EXCITED."""
         o = self.options
@@ -1174,7 +1197,6 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         slip = np.asarray(slip, dtype=float)
         value, _ = mu_and_jacobian_theta(slip, np.full_like(slip, speed_mps), np.full_like(slip, theta), p, ("theta",))
         return value
-
 
     @property
     def parameters(self) -> dict[str, float]:

@@ -205,15 +205,16 @@ class EstimateConfidence:
         or more; 0 if none.
 
         Where the tyre gave more than the curve says, its peak is higher than the curve's: the
-        static model rounding off a sharp peak (a Magic Formula tyre that
-        falls 30 % past it, an ABS dwelling deep in slip pulling the fit down to the plateau)
-        shows here, as a band of slips the fit passes under on every ABS cycle. The spread of
-        μ_max cannot show it (the samples agree with each other), the model-mismatch floor is
-        the same for every tyre: this is the mismatch the data measure. The excess is largest at
-        the tyre's peak and falls to nothing at the band's edges: its mean over a band is about
-        half its top (`misfit_peak_ratio`). The lift is how far the published peak was raised above
-        the fitted one (by the wheel's measured peak or the car's deceleration): that much of
-        the excess is already answered.
+        static model rounding off a sharp peak (a Magic Formula tyre that falls 30 % past it, an
+        ABS dwelling deep in slip pulling the fit down to the plateau) shows here, as a band of
+        slips the fit passes under on every ABS cycle. The spread of μ_max cannot show it (the
+        samples agree with each other), the model-mismatch floor is the same for every tyre: this
+        is the mismatch the data measure. `_confidence` counts it `misfit_peak_ratio` times: at
+        1 (the band mean itself) the campaign's outputs are within 10 % at least as often as
+        their confidence says; at 2 (the top of an excess that falls to nothing at a band's
+        edges) they were within it far more often. The lift is how far the published peak was
+        raised above the fitted one (by the wheel's measured peak or the car's deceleration):
+        that much of the excess is already answered.
         """
         w = self._window
         lo, hi = w.start, w.end

@@ -752,8 +752,9 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
             self._mu_history.clear()
             self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
             self._measured_peaks = [0.0] * N_WHEELS
+            # (The peaks the wheels showed were the old road's.)
             self._wheel_shown_s = [-math.inf] * N_WHEELS
-            self._shape_showed_peak = [False] * N_WHEELS   # (the peaks they showed were the old road's)
+            self._shape_showed_peak = [False] * N_WHEELS
             # (`_peak_seen_speed` stays: the stop is still in ABS, only on another road; a wheel held
             # past the new fit's peak is evidence of it as much as of the old one's.)
 

@@ -483,7 +483,7 @@ enum {
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released,
-    *A_lag_state;
+    *A_unjudged, *A_lag_state;
 
 typedef struct {
     long repeats[NW];
@@ -494,6 +494,7 @@ typedef struct {
     double last_sample, bias, unexplained, speed_time, speed_est;
     long bias_samples, ref_disagreements;
     double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
+    double unjudged;
     int model_holds, released;
     double lag[LAG_N];
 } FEState;
@@ -585,7 +586,8 @@ static int load_state(PyObject *fe, FEState *s)
         || get_float_attr(fe, A_recent_brake, &s->recent_brake, NULL) < 0
         || get_bool_attr(fe, A_released, &s->released) < 0
         || get_float_attr(fe, A_gain_factor, &s->gain_factor, NULL) < 0
-        || get_bool_attr(fe, A_model_holds, &s->model_holds) < 0)
+        || get_bool_attr(fe, A_model_holds, &s->model_holds) < 0
+        || get_float_attr(fe, A_unjudged, &s->unjudged, NULL) < 0)
         goto out;
     PyObject *lag = PyObject_GetAttr(fe, A_lag_state);
     if (!lag)
@@ -660,6 +662,7 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_released, PyBool_FromLong(s->released)) < 0
         || set_attr_new(fe, A_gain_factor, PyFloat_FromDouble(s->gain_factor)) < 0
         || set_attr_new(fe, A_model_holds, PyBool_FromLong(s->model_holds)) < 0
+        || set_attr_new(fe, A_unjudged, PyFloat_FromDouble(s->unjudged)) < 0
         || set_attr_new(fe, A_lag_state, tuple_of(s->lag, LAG_N)) < 0)
         goto out;
     rc = 0;
@@ -815,16 +818,35 @@ static void learn_pressure_lag(FEState *s, const double *k, double brake, double
     s->lag[0] = s_bb, s->lag[1] = s_bd, s->lag[2] = s_dd, s->lag[3] = s_bn, s->lag[4] = s_dn;
 }
 
+/* FrontEnd's _unexplained_torque, on the window sums of `s`. */
+static double unexplained_torque(const FEState *s, double low, double high)
+{
+    const double mean_needed = s->recent_needed / s->recent_weight;
+    const double mean_brake = s->recent_brake / s->recent_weight;
+    const double lag_explains = s->recent_lag / s->recent_weight;
+    if (mean_needed > high * mean_brake)
+        return mean_needed - high * mean_brake - py_max(lag_explains, 0.0);
+    if (mean_needed < low * mean_brake)
+        return low * mean_brake - mean_needed - py_max(-lag_explains, 0.0);
+    return 0.0;
+}
+
 /* FrontEnd._update_brake_gain */
 static void update_brake_gain(FEState *s, const double *k, double accel_long, double speed, const double *inertia,
-                              const double *brake, const double *drive, const double *wl, const double *rates)
+                              const double *brake, const double *drive, const double *wl, const double *rates,
+                              int braking)
 {
     const double decel = -accel_long;
     const double raw_brake = sum_of(brake, NW), raw_rate = sum_of(rates, NW);
     const double total_brake = py_max(raw_brake + s->lag[LAG_LAG] * raw_rate, 0.0);
     const double brake_rate = (total_brake - s->last_brake) / k[K_SAMPLE_PERIOD];
     s->last_brake = total_brake;
-    if (decel < k[K_GAIN_MIN_DECEL] || total_brake < 1.0 || !isfinite(brake_rate))
+    s->unjudged += k[K_SAMPLE_PERIOD];
+    if (s->unjudged > BRAKE_MODEL_WINDOW) {
+        s->model_holds = 1;
+        s->recent_weight = s->recent_needed = s->recent_brake = s->recent_lag = 0.0;
+    }
+    if (!braking || decel < k[K_GAIN_MIN_DECEL] || total_brake < 1.0 || !isfinite(brake_rate))
         return;
     const double locked = py_max(0.3, LOCKED_WHEEL_RATIO * speed);
     double slowest = wl[0];
@@ -841,27 +863,25 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
     if (!isfinite(ratio))
         return;
     const double recent = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / BRAKE_MODEL_WINDOW);
+    s->unjudged = 0.0;
     s->recent_weight = recent * s->recent_weight + total_brake;
     s->recent_needed = recent * s->recent_needed + total_brake * needed;
     s->recent_brake = recent * s->recent_brake + total_brake * total_brake;
     s->recent_lag = recent * s->recent_lag + total_brake * PRESSURE_SENSOR_LAG * brake_rate;
     const double window_ratio = s->recent_needed / s->recent_brake;
-    const double signed_gap = (s->recent_needed - s->recent_brake) / s->recent_weight;
-    const double lag_explains = s->recent_lag / s->recent_weight;
-    const double gap = signed_gap * lag_explains > 0 ? fabs(signed_gap) - fabs(lag_explains) : fabs(signed_gap);
     const double gains = k[K_BRAKE_GAIN_FL] + k[K_BRAKE_GAIN_FR] + k[K_BRAKE_GAIN_RL] + k[K_BRAKE_GAIN_RR];
     const double accel_tolerance = BODY_ACCEL_TOLERANCE
                                    + (s->bias_samples < ACCEL_BIAS_LEARNT_SAMPLES ? UNLEARNT_ACCEL_TOLERANCE : 0.0);
     const double tolerance = k[K_MASS] * k[K_RADIUS] * accel_tolerance + PRESSURE_TOLERANCE * gains;
-    const int resolved = gap > tolerance;
+    const int resolved = unexplained_torque(s, 1.0, 1.0) > tolerance;
+    const int beyond_gains = unexplained_torque(s, (1.0 - lim) / BRAKE_MODEL_MARGIN,
+                                                (1.0 + lim) * BRAKE_MODEL_MARGIN) > tolerance;
     const int released = (k[K_MASTER_ONLY] != 0.0
                           && ((window_ratio < 1.0 - lim && resolved)
                               || (ratio < 1.0 - lim && total_brake - needed > tolerance)))
                          || s->released;
     s->released = released;
-    s->model_holds = released || !resolved
-                     || ((1.0 - lim) / BRAKE_MODEL_MARGIN <= window_ratio
-                         && window_ratio <= (1.0 + lim) * BRAKE_MODEL_MARGIN);
+    s->model_holds = released || !beyond_gains;
     if (!released) {
         if (k[K_LAG_COMPENSATION] != 0.0)
             learn_pressure_lag(s, k, raw_brake, raw_rate, needed);
@@ -1089,7 +1109,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     for (int i = 0; i < NW; i++)
         inertia[i] = k[K_INERTIA] * omega_dot[i];
     if (k[K_GAIN_CORRECTION] != 0.0 && !glitch)
-        update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive, wl, rates);
+        update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive, wl, rates, braking);
     const double gain = s.gain_factor;
     /* A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ. */
     for (int i = 0; i < NW; i++)
@@ -1161,7 +1181,7 @@ static int intern_attributes(void)
         {&A_recent_weight, "_recent_weight_nm"},
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
-        {&A_model_holds, "_brake_model_holds"}, {&A_lag_state, "_lag_state"},
+        {&A_model_holds, "_brake_model_holds"}, {&A_unjudged, "_unjudged_s"}, {&A_lag_state, "_lag_state"},
     };
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (!(*names[i].slot = PyUnicode_InternFromString(names[i].name)))

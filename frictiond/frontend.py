@@ -53,7 +53,7 @@ FREE_ROLLING_SPREAD = 0.04     # relative wheel-speed spread a curve can explain
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
-_BRAKE_MODEL_WINDOW_S = 0.2                 # ... in most of the braking of about this long
+_BRAKE_MODEL_WINDOW_S = 0.2                 # the body check's window: about this much braking
 # A wheel slower than this share of the car's speed (and 0.3 m/s) is locked: its brake clamps it
 # and passes only the tyre's sliding force, not the torque its pressure could give.
 LOCKED_WHEEL_RATIO = 0.05      # (also in _frontcore.c)
@@ -330,6 +330,7 @@ class FrontEnd:
         self._last_brake_nm = 0.0
         self._brake_released = False       # one master pressure overstating the brakes: an ABS at work
         self._brake_model_holds = True
+        self._unjudged_s = 0.0             # time since a sample last entered that window
         # The pressure-lag regression (`_learn_pressure_lag`): Σ B², Σ B·Ḃ, Σ Ḃ², Σ B·N, Σ Ḃ·N, the
         # lag it gives, then the time and the four matched brake torques of the last sample (their
         # rates). One tuple, replaced whole, so that a suspect sample's state is put back as is.
@@ -851,7 +852,7 @@ class FrontEnd:
         if opts.brake_gain_correction and not glitch:
             # The body's deceleration through the same filter as the torques it is compared with.
             self._update_brake_gain(accel_long_matched - self._accel_bias_mps2,
-                                    speed, inertia_torques, brake_torques, drive, wheel_linear, brake_rates)
+                                    speed, inertia_torques, brake_torques, drive, wheel_linear, brake_rates, braking)
         gain = self._brake_gain_factor
         # A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ.
         lag = self._lag_state[5]
@@ -1025,6 +1026,7 @@ class FrontEnd:
         drive: list[float],
         wheel_linear: list[float],
         brake_rates: list[float],
+        braking: bool,
     ) -> None:
         """Body equation M dv/dt = −ΣF_x − B v − D v² as an independent check on brake force."""
         opts = self.options
@@ -1034,7 +1036,17 @@ class FrontEnd:
         total_brake = max(raw_brake + self._lag_state[5] * raw_rate, 0.0)   # (advanced by the lag learnt)
         brake_rate = (total_brake - self._last_brake_nm) / self.sample_period_s
         self._last_brake_nm = total_brake
-        if decel < opts.brake_gain_min_decel or total_brake < 1.0 or not math.isfinite(brake_rate):
+        # The verdict is on the last ~0.2 s of braking: after as long with no sample judged (brakes
+        # off, the car not yet decelerating, a wheel locked) it has nothing to say, and the next
+        # judged sample starts the window again.
+        self._unjudged_s += self.sample_period_s
+        if self._unjudged_s > _BRAKE_MODEL_WINDOW_S:
+            self._brake_model_holds = True
+            self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = self._recent_lag_nm = 0.0
+        # Only while some wheel is braked: below that the pressures are their sensors' offsets
+        # and the deceleration is drag and the accelerometer's offset (before free rolling has
+        # taught it), and a window of those met the next stop's first samples as a "fault".
+        if not braking or decel < opts.brake_gain_min_decel or total_brake < 1.0 or not math.isfinite(brake_rate):
             return
         # Not at walking pace (slip and the wheels' derivatives are ill-conditioned there, and a
         # car held at rest by its brakes decelerates by nothing), nor with a wheel locked: a
@@ -1060,27 +1072,27 @@ class FrontEnd:
             return      # a NaN here would stay in the sums for good
         # The pressures against the body over the last ~0.2 s of braking (sums of torques, so that
         # the pressure sensors' lag and the wheels' inertia torques through an ABS cycle average
-        # out, and small torques count little): far outside the gain limits, and by more than an
-        # accelerometer offset and the pressures' offsets explain, the pressures do not say what
-        # the brakes do (a signal scaled wrong, a sensor drifting by a factor). Then no wheel's μ
-        # is trusted and the front end reports a fault.
+        # out, and small torques count little): far outside the gain limits, by more than an
+        # accelerometer offset, the pressures' offsets and the sensors' lag explain on top, the
+        # pressures do not say what the brakes do (a signal scaled wrong, a sensor drifting by a
+        # factor). Then no wheel's μ is trusted and the front end reports a fault.
         # Each sample weighs by its brake torque (the first instants of a stop, a few N·m against
         # the wheels' inertia and a lagging accelerometer, count little).
         recent = 1.0 - min(1.0, self.sample_period_s / _BRAKE_MODEL_WINDOW_S)
+        self._unjudged_s = 0.0
         self._recent_weight_nm = recent * self._recent_weight_nm + total_brake
         self._recent_needed_nm = recent * self._recent_needed_nm + total_brake * needed
         self._recent_brake_nm = recent * self._recent_brake_nm + total_brake * total_brake
         self._recent_lag_nm = recent * self._recent_lag_nm + total_brake * PRESSURE_SENSOR_LAG_S * brake_rate
         window_ratio = self._recent_needed_nm / self._recent_brake_nm
-        # A sensor trailing the brakes reads low while they apply and high while they release: a
-        # lag of up to `PRESSURE_SENSOR_LAG_S` explains a disagreement of that sign, up to that size.
-        gap = (self._recent_needed_nm - self._recent_brake_nm) / self._recent_weight_nm
-        lag_explains = self._recent_lag_nm / self._recent_weight_nm
-        gap = abs(gap) - abs(lag_explains) if gap * lag_explains > 0 else abs(gap)
         accel_tolerance = BODY_ACCEL_TOLERANCE_MPS2 + (
             UNLEARNT_ACCEL_TOLERANCE_MPS2 if self._accel_bias_samples < ACCEL_BIAS_LEARNT_SAMPLES else 0.0)
         tolerance = veh.mass * veh.wheel_radius * accel_tolerance + PRESSURE_TOLERANCE_BAR * sum(self._brake_gains)
-        resolved = gap > tolerance
+        resolved = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
+                                       self._recent_weight_nm, 1.0, 1.0) > tolerance
+        beyond_gains = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
+                                           self._recent_weight_nm, (1.0 - lim) / _BRAKE_MODEL_MARGIN,
+                                           (1.0 + lim) * _BRAKE_MODEL_MARGIN) > tolerance
         # With one master pressure for all wheels, brakes giving less than it says beyond what the
         # gain correction explains are an ABS releasing wheels, not a wrong signal: no gain is
         # learnt then, and no wheel's brake torque is known (`_brake_released`). Judged on this
@@ -1091,8 +1103,7 @@ class FrontEnd:
         # Once an ABS has released wheels in a stop it modulates them until the stop ends: from
         # then on the master pressure bounds the wheels' pressures and says nothing more.
         self._brake_released = released = released or self._brake_released
-        self._brake_model_holds = (released or not resolved
-                                   or (1.0 - lim) / _BRAKE_MODEL_MARGIN <= window_ratio <= (1.0 + lim) * _BRAKE_MODEL_MARGIN)
+        self._brake_model_holds = released or not beyond_gains
         if not released:
             if opts.pressure_lag_compensation:
                 self._learn_pressure_lag(raw_brake, raw_rate, needed)
@@ -1147,7 +1158,7 @@ _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
 _LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
-                 "_brake_model_holds", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state")
+                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state")
 # The fault a required input's persistently rejected frames give, by kind of rejection.
 _REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
                      "clock step": "clock step"}
@@ -1168,6 +1179,25 @@ def _input_label(signals: Iterable[str]) -> str:
 _PHYSICS_TYPES = (PhysicalSample, FrontEndResult, "acceleration out of range", "brake pressure out of range",
                   "brake pressure implausible", "wheel speed glitch", "wheel speed stuck",
                   "brake pressure disagrees with deceleration")
+
+
+def _unexplained_torque(needed: float, brake: float, lag: float, weight: float, low: float, high: float) -> float:
+    """How far the torque the body needs lies outside what the pressures give times a gain in
+    [`low`, `high`], beyond what the pressure sensors' lag explains (N·m; 0 inside the band).
+
+    The arguments are the brake-weighted window sums: Σb·N, Σb·b, Σb·lag·ḃ and Σb. A sensor
+    trailing the brakes reads low while they apply and high while they release: a lag of up to
+    `PRESSURE_SENSOR_LAG_S` explains a disagreement of that sign, up to that size. The gain band
+    and the lag are one allowance, not two tests: a car whose brakes are 18 % stronger than
+    configured, seen through a lagging sensor as the pedal goes down, is within both together.
+    (`_frontcore.c`'s `unexplained_torque` is the same.)
+    """
+    mean_needed, mean_brake, lag_explains = needed / weight, brake / weight, lag / weight
+    if mean_needed > high * mean_brake:
+        return mean_needed - high * mean_brake - max(lag_explains, 0.0)
+    if mean_needed < low * mean_brake:
+        return low * mean_brake - mean_needed - max(-lag_explains, 0.0)
+    return 0.0
 
 
 def _second_fastest(speeds: list[float]) -> float:

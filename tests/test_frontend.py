@@ -225,7 +225,7 @@ def test_brake_gain_is_learnt_within_a_stop_and_survives_a_non_finite_sample():
     assert fe.brake_gain_factor == pytest.approx(1 / 1.2, rel=0.04)
     learnt = fe.brake_gain_factor
     fe._update_brake_gain(-drive.decel, 20.0, [0.0] * 4, [500.0, 500.0, 200.0, float("nan")], [0.0] * 4, [20.0] * 4,
-                          [0.0] * 4)
+                          [0.0] * 4, True)
     assert fe.brake_gain_factor == learnt
 
 
@@ -460,7 +460,9 @@ class CyclingPressureDrive(Drive):
 def test_pressures_lagging_an_abs_cycle_are_no_fault_but_a_factor_is(compiled):
     # On ice the brake torques are of the order of the wheels' inertia torques, and a lagging
     # sensor reads ±60 % off through each cycle: sample by sample the pressures "disagree",
-    # over the cycles they do not. Steady pressures off by a factor of 2.5 do.
+    # over the cycles they do not. Steady pressures off by a factor of 2.5 do, once the car has
+    # rolled long enough to learn its accelerometer's offset (before that, 0.3 m/s² of possible
+    # offset on a 1 m/s² stop and the gain limits together explain a factor of 2).
     drive = CyclingPressureDrive(0.6, v0=20.0, decel=1.0, slip=0.03)
     drive.pressure = _needed_pressure(1.0, 0.03, 19.0)
     fe = make()
@@ -469,9 +471,9 @@ def test_pressures_lagging_an_abs_cycle_are_no_fault_but_a_factor_is(compiled):
     results = feed(fe, drive, duration=1.5)
     assert len(results) > 100 and all(r.fault is None for r in results)
     fe.reset()
-    drive.swing = 0.0
-    drive.pressure = 2.5 * _needed_pressure(1.0, 0.03, 19.0)
-    assert any(r.fault == "brake pressure disagrees with deceleration" for r in feed(fe, drive, duration=1.5))
+    too_high = 2.5 * _needed_pressure(1.0, 0.03, 19.0)
+    results = feed_phases(fe, [(0.7, lambda t: 0.05, lambda t: 0.0), (1.5, lambda t: 1.0, lambda t: too_high)])
+    assert _disagreements(results, 0.7) > 100
 
 
 @pytest.mark.parametrize("compiled", [True, False])
@@ -494,3 +496,95 @@ def test_master_pressure_says_nothing_for_the_rest_of_a_stop_once_an_abs_release
     drive.pressure = needed
     next_stop = [r for r in feed(fe, drive, duration=0.6) if r.sample is not None and r.sample.time_s > 0.3]
     assert next_stop and all(all(r.sample.usable) for r in next_stop)
+
+
+def feed_phases(fe: FrontEnd, phases, slip: float = 0.03, pressure_lag: float = 0.0) -> list:
+    """Straight-line driving through `phases`, each (duration, deceleration(t in phase), the brake
+    pressure the sensors read(t in phase)); the speed and wheel speeds integrate the deceleration,
+    so the phases join smoothly. The pressure sensors read their value `pressure_lag` late.
+    Returns (time, result) pairs."""
+    dt, t, v = 0.01, 0.0, 30.0
+    schedule, start = [], 0.0
+    for duration, decel, pressure in phases:
+        schedule.append((start, start + duration, decel, pressure))
+        start += duration
+
+    def phase_at(time):
+        for t0, t1, decel, pressure in schedule:
+            if time < t1:
+                return t0, decel, pressure
+        return schedule[-1][0], schedule[-1][2], schedule[-1][3]
+
+    out = []
+    while t < start:
+        t0, decel, pressure = phase_at(t)
+        a = decel(t - t0)
+        tp0, _, reading = phase_at(max(t - pressure_lag, 0.0))
+        w = v * (1 - slip) / VEH.wheel_radius
+        for name, values in (("WHEELS", dict(zip(WHEEL_SPEED_NAMES, (w,) * 4))),
+                             ("ACCEL", {"accel_long": -a, "accel_lat": 0.0, "yaw_rate": 0.0}),
+                             ("PRESS", dict(zip(PRESSURE_NAMES, (reading(max(t - pressure_lag, 0.0) - tp0),) * 4)))):
+            r = fe.push(t, name, values)
+            if r is not None:
+                out.append((t, r))
+        v -= a * dt
+        t = round(t + dt, 6)
+    return out
+
+
+def _disagreements(results, t0: float, t1: float = math.inf) -> int:
+    return sum(r.fault == "brake pressure disagrees with deceleration" for t, r in results if t0 <= t < t1)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_disagreement_that_ended_does_not_fault_the_next_stop(compiled):
+    # Pressures reading 2.5 times what the brakes do are a fault while they last; after the brakes
+    # are let go for a while, a stop whose pressures agree with the body starts with a clean slate:
+    # the window of that verdict is the last ~0.2 s of braking, not the last braking there was.
+    fe = make()
+    if not compiled:
+        fe.core = None
+    needed = _needed_pressure(6.0, 0.03, 25.0)
+    results = feed_phases(fe, [(0.6, lambda t: 6.0, lambda t: 2.5 * needed),
+                               (0.6, lambda t: 0.1, lambda t: 0.0),
+                               (0.8, lambda t: 6.0, lambda t: needed)])
+    assert _disagreements(results, 0.3, 0.6) > 20
+    assert _disagreements(results, 1.2) == 0
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_pressures_below_braking_are_not_judged_against_the_body(compiled):
+    # Before the pedal goes down the pressure sensors read their offsets (here half a bar above
+    # the push-out pressure, below what counts as braking) while the car slows by 1 m/s² for
+    # reasons no brake explains (a grade, an accelerometer offset not yet learnt). That is no
+    # evidence about the brakes, and the stop that follows must not start with a fault.
+    fe = make()
+    if not compiled:
+        fe.core = None
+    needed = _needed_pressure(6.0, 0.03, 25.0)
+    offset = VEH.brake_pushout_pressure + 0.5
+    results = feed_phases(fe, [(0.8, lambda t: 1.0, lambda t: offset),
+                               (0.8, lambda t: 1.0 + 5.0 * min(1.0, t / 0.25),
+                                lambda t: offset + (needed - offset) * min(1.0, t / 0.25))])
+    assert _disagreements(results, 0.0) == 0
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_stronger_brakes_seen_through_a_lagging_sensor_are_no_fault(compiled):
+    # Brakes 30 % stronger than configured (pads in service: within the gain limits) and a
+    # pressure sensor 40 ms late while the pedal goes down in 0.25 s: each alone is explained, and
+    # so are both together, the lag's share on top of the gain's. Pressures 2.5 times too high
+    # through the same sensor are still a fault.
+    needed = _needed_pressure(6.0, 0.03, 25.0)
+    pushout = VEH.brake_pushout_pressure
+
+    def pedal(scale):
+        return lambda t: pushout + scale * (needed - pushout) * min(1.0, t / 0.25)
+
+    for scale, least, most in ((1 / 1.3, 0, 0), (2.5, 50, 100)):
+        fe = make()
+        if not compiled:
+            fe.core = None
+        results = feed_phases(fe, [(0.3, lambda t: 0.1, lambda t: 0.0),
+                                   (1.0, lambda t: 6.0 * min(1.0, t / 0.25), pedal(scale))], pressure_lag=0.04)
+        assert least <= _disagreements(results, 0.3) <= most, scale

@@ -96,9 +96,12 @@ class FrontEndOptions:
     """Front-end tuning; field names are the config keys under `frontend:`."""
 
     # Wheel-speed samples in the local quadratic fit (odd); 0: as many as span
-    # `derivative_span_s` at the wheel-speed message's cycle time (7 at 10 ms, 5 at 20 ms).
+    # `derivative_span_s` at the wheel-speed message's cycle time (5 at 10 and at 20 ms, 9 at 5 ms).
+    # The fit averages ω̇, and the torques matched to it, over its span: an ABS cycle's peak of
+    # grip lasts a few tens of ms, and over 60 ms the μ measured at the top of the cycle read 10 %
+    # under the tyre's (half of that over 40 ms), pulling the fitted peak down with it.
     derivative_window: int = 0
-    derivative_span_s: float = 0.06
+    derivative_span_s: float = 0.04
     min_speed: float = 3.0                # m/s; below it slip is ill-conditioned
     max_slip: float = 0.6                 # samples beyond it (near lock) are not used
     min_brake_pressure: float = 1.0       # bar above push-out for a wheel to count as braked

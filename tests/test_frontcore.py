@@ -169,7 +169,8 @@ def test_history_push_is_the_same_on_both_paths():
 PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_sample_time_s", "_accel_bias_mps2",
                  "_accel_bias_samples", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
                  "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",
-                 "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_model_holds", "_lag_state")
+                 "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_model_holds", "_unjudged_s",
+                 "_lag_state")
 
 
 def _physics_stream(seed: int, steps: int):
@@ -184,6 +185,8 @@ def _physics_stream(seed: int, steps: int):
         phase = (k // 60) % 6          # 0.6 s of each regime in turn
         t += 0.01 if rng.random() > 0.01 else 0.4   # now and then a gap beyond max_gap
         decel = {0: 0.0, 1: 6.0, 2: 2.0, 3: -1.5, 4: 8.0, 5: 0.5}[phase]
+        if phase == 1:      # brakes swinging at 3 Hz, their pressure sensor 20 ms late (the lag's branch)
+            decel += 2.5 * math.sin(6 * math.pi * t)
         v = max(v - decel * 0.01, 0.0) if v > 4 else 25.0
         slips = rng.uniform(0.0, 0.25, 4) if phase in (1, 4) else rng.uniform(-0.01, 0.02, 4)
         omega = [max(v * (1 - s), 0.0) / 0.31 + float(rng.normal(0, 0.05)) for s in slips]
@@ -192,6 +195,8 @@ def _physics_stream(seed: int, steps: int):
         if phase == 5 and k % 60 > 10:
             omega[3] = 55.0                                       # a stuck one
         pressures = [float(rng.uniform(20, 90)) if phase in (1, 4) else float(rng.uniform(0, 0.5))] * 4
+        if phase == 1:
+            pressures = [55.0 + 23.0 * math.sin(6 * math.pi * (t - 0.02))] * 4
         if phase == 4 and k % 60 > 40:
             pressures = [0.0] * 4                                 # gone while the car decelerates
         if rng.random() < 0.01:

@@ -35,28 +35,76 @@ static int glitch_at(const double *t, const double *y, Py_ssize_t n, Py_ssize_t 
            || (da < -threshold && db < -threshold && dc < -threshold);
 }
 
-/* fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights)
+/* frontend._quadratic_fit on times[lo, lo + m) and each wheel's speeds y[w * stride + k]: ω(t_c),
+ * dω/dt(t_c) and the matched torque weights of those m samples (into weights[0, m)). 0 for
+ * timestamps too degenerate for the closed form. scratch: 4 * (m + 1) doubles. */
+static int quadratic_fit(const double *times, const double *y, Py_ssize_t stride, Py_ssize_t lo, Py_ssize_t m,
+                         double t_c, double *omega, double *omega_dot, double *weights, double *scratch)
+{
+    double *u = scratch, *u2 = scratch + (m + 1), *c = scratch + 2 * (m + 1), *interval = scratch + 3 * (m + 1);
+    const double *t = times + lo;
+    double h = fmax(fabs(t[0] - t_c), fabs(t[m - 1] - t_c));
+    if (h == 0.0)
+        h = 1.0;
+    for (Py_ssize_t k = 0; k < m; k++) {
+        u[k] = (t[k] - t_c) / h;
+        u2[k] = u[k] * u[k];
+    }
+    const double s1 = sum_of(u, m), s2 = sum_of(u2, m), s3 = dot_of(u, u2, m), s4 = dot_of(u2, u2, m);
+    const double dn = (double)m;
+    /* Symmetric 3x3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate. */
+    const double c00 = s2 * s4 - s3 * s3, c01 = s2 * s3 - s1 * s4, c02 = s1 * s3 - s2 * s2;
+    const double c11 = dn * s4 - s2 * s2, c12 = s1 * s2 - dn * s3;
+    const double det = dn * c00 + s1 * c01 + s2 * c02;
+    if (!(det > 1e-9 * fmax(dn * s2 * s4, 1e-300)))
+        return 0;
+    const double inv = 1.0 / det;
+    for (int w = 0; w < NW; w++) {
+        const double *yw = y + w * stride + lo;
+        const double b0 = sum_of(yw, m), b1 = dot_of(u, yw, m), b2 = dot_of(u2, yw, m);
+        omega[w] = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
+        omega_dot[w] = (c01 * b0 + c11 * b1 + c12 * b2) * inv / h;
+    }
+    /* frontend._matched_weights with coef = (c01, c11, c12)·inv/h. */
+    const double q0 = c01 * inv / h, q1 = c11 * inv / h, q2 = c12 * inv / h;
+    for (Py_ssize_t k = 0; k < m; k++)
+        c[k] = q0 + q1 * u[k] + q2 * u[k] * u[k];
+    double tail = 0.0;
+    for (Py_ssize_t k = 0; k <= m; k++)
+        interval[k] = 0.0;
+    for (Py_ssize_t j = m - 1; j > 0; j--) {
+        tail += c[j];
+        interval[j] = tail * (t[j] - t[j - 1]);
+    }
+    for (Py_ssize_t k = 0; k < m; k++)
+        weights[k] = 0.5 * (interval[k] + interval[k + 1]);
+    return 1;
+}
+
+/* fit_wheels(times, speeds, spike_threshold, torque_window)
+ *   -> (t_c, omega, omega_dot, glitch, torque_weights, torque_omega_dot)
  * or None when the timestamps are too degenerate for the closed form (the caller then uses
- * least squares). `speeds`: one 4-sequence per time. */
+ * least squares). `speeds`: one 4-sequence per time. FrontEnd._fit_window. */
 static PyObject *py_fit_wheels(PyObject *self, PyObject *args)
 {
     (void)self;
     PyObject *o_times, *o_speeds;
     double threshold;
-    if (!PyArg_ParseTuple(args, "OOd:fit_wheels", &o_times, &o_speeds, &threshold))
+    Py_ssize_t inner;
+    if (!PyArg_ParseTuple(args, "OOdn:fit_wheels", &o_times, &o_speeds, &threshold, &inner))
         return NULL;
     Py_ssize_t n;
     double *times = floats_of(o_times, &n, "times");
     if (!times)
         return NULL;
-    double *buf = PyMem_Malloc((size_t)(4 * (n + 1) + NW * (n + 1)) * sizeof(double));
+    double *buf = PyMem_Malloc((size_t)(6 * (n + 1) + NW * (n + 1)) * sizeof(double));
     PyObject *seq = NULL, *result = NULL;
     if (!buf) {
         PyErr_NoMemory();
         goto out;
     }
-    double *u = buf, *u2 = buf + (n + 1), *c = buf + 2 * (n + 1), *interval = buf + 3 * (n + 1);
-    double *y = buf + 4 * (n + 1);   /* y[w * (n + 1) + k] */
+    double *scratch = buf, *weights = buf + 4 * (n + 1), *inner_weights = buf + 5 * (n + 1);
+    double *y = buf + 6 * (n + 1);   /* y[w * (n + 1) + k] */
     seq = PySequence_Fast(o_speeds, "speeds");
     if (!seq)
         goto out;
@@ -84,57 +132,38 @@ static PyObject *py_fit_wheels(PyObject *self, PyObject *args)
         Py_DECREF(row);
     }
     const double t_c = times[n / 2];
-    double h = fmax(fabs(times[0] - t_c), fabs(times[n - 1] - t_c));
-    if (h == 0.0)
-        h = 1.0;
-    for (Py_ssize_t k = 0; k < n; k++) {
-        u[k] = (times[k] - t_c) / h;
-        u2[k] = u[k] * u[k];
-    }
-    const double s1 = sum_of(u, n), s2 = sum_of(u2, n), s3 = dot_of(u, u2, n), s4 = dot_of(u2, u2, n);
-    const double dn = (double)n;
-    /* Symmetric 3x3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate. */
-    const double c00 = s2 * s4 - s3 * s3, c01 = s2 * s3 - s1 * s4, c02 = s1 * s3 - s2 * s2;
-    const double c11 = dn * s4 - s2 * s2, c12 = s1 * s2 - dn * s3, c22 = dn * s2 - s1 * s1;
-    const double det = dn * c00 + s1 * c01 + s2 * c02;
-    if (!(det > 1e-9 * fmax(dn * s2 * s4, 1e-300))) {
+    double omega[NW], omega_dot[NW], inner_omega[NW], torque_omega_dot[NW];
+    if (!quadratic_fit(times, y, n + 1, 0, n, t_c, omega, omega_dot, weights, scratch)) {
         result = Py_None;
         Py_INCREF(result);
         goto out;
     }
-    const double inv = 1.0 / det;
+    double *torque_weights = weights;
+    for (int w = 0; w < NW; w++)
+        torque_omega_dot[w] = omega_dot[w];
+    if (inner >= 3 && inner < n) {
+        const Py_ssize_t lo = (n - inner) / 2;
+        for (Py_ssize_t k = 0; k < n; k++)
+            inner_weights[k] = 0.0;
+        if (quadratic_fit(times, y, n + 1, lo, inner, t_c, inner_omega, torque_omega_dot, inner_weights + lo,
+                          scratch))
+            torque_weights = inner_weights;
+        else
+            for (int w = 0; w < NW; w++)
+                torque_omega_dot[w] = omega_dot[w];
+    }
     int glitch = 0;
-    double omega[NW], omega_dot[NW];
-    (void)c22;
-    for (int w = 0; w < NW; w++) {
-        const double *yw = y + w * (n + 1);
-        const double b0 = sum_of(yw, n), b1 = dot_of(u, yw, n), b2 = dot_of(u2, yw, n);
-        const double k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
-        const double k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv;
-        glitch = glitch || glitch_at(times, yw, n, n - 3, threshold);
-        omega[w] = k0;
-        omega_dot[w] = k1 / h;
-    }
-    /* frontend._matched_weights with coef = (c01, c11, c12)·inv/h. */
-    const double q0 = c01 * inv / h, q1 = c11 * inv / h, q2 = c12 * inv / h;
-    for (Py_ssize_t k = 0; k < n; k++)
-        c[k] = q0 + q1 * u[k] + q2 * u[k] * u[k];
-    double tail = 0.0;
-    for (Py_ssize_t k = 0; k <= n; k++)
-        interval[k] = 0.0;
-    for (Py_ssize_t j = n - 1; j > 0; j--) {
-        tail += c[j];
-        interval[j] = tail * (times[j] - times[j - 1]);
-    }
-    for (Py_ssize_t k = 0; k < n; k++)
-        c[k] = 0.5 * (interval[k] + interval[k + 1]);
+    for (int w = 0; w < NW && !glitch; w++)
+        glitch = glitch_at(times, y + w * (n + 1), n, n - 3, threshold);
     {
-        PyObject *a = tuple_of(omega, NW), *b = a ? tuple_of(omega_dot, NW) : NULL, *wt = b ? tuple_of(c, n) : NULL;
-        if (wt)
-            result = Py_BuildValue("(dNNON)", t_c, a, b, glitch ? Py_True : Py_False, wt);
+        PyObject *a = tuple_of(omega, NW), *b = a ? tuple_of(omega_dot, NW) : NULL;
+        PyObject *wt = b ? tuple_of(torque_weights, n) : NULL, *td = wt ? tuple_of(torque_omega_dot, NW) : NULL;
+        if (td)
+            result = Py_BuildValue("(dNNONN)", t_c, a, b, glitch ? Py_True : Py_False, wt, td);
         else {
             Py_XDECREF(a);
             Py_XDECREF(b);
+            Py_XDECREF(wt);
         }
     }
 out:
@@ -912,7 +941,7 @@ static PyObject *make_result(PyObject *result_type, PyObject *sample, PyObject *
 }
 
 /* sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,
- *                wheel_times, torque_weights, ref, ref_fresh) -> FrontEndResult
+ *                wheel_times, torque_weights, ref, ref_fresh, torque_omega_dot) -> FrontEndResult
  * types: (PhysicalSample, FrontEndResult, the six fault messages). */
 static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -921,7 +950,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     double t_c, ref = 0.0;
     int glitch, ref_fresh;
     /* (METH_FASTCALL: converted here, once per trigger, without a format string) */
-    if (!arg_count("sample_physics", nargs, 14))
+    if (!arg_count("sample_physics", nargs, 15))
         return NULL;
     fe = args[0], o_k = args[1], types = args[2], o_omega = args[4], o_omega_dot = args[5], inputs = args[7];
     stale = args[8], lookups = args[9], o_times = args[10], o_weights = args[11], o_ref = args[12];
@@ -944,12 +973,16 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     const int has_ref = o_ref != Py_None;
     if (has_ref && (ref = PyFloat_AsDouble(o_ref)) == -1.0 && PyErr_Occurred())
         return NULL;
-    double omega[MAX_POINTS], omega_dot[MAX_POINTS];
-    if (floats(o_omega, omega, "omega") != NW || floats(o_omega_dot, omega_dot, "omega_dot") != NW) {
+    double omega[MAX_POINTS], omega_dot[MAX_POINTS], torque_omega_dot[MAX_POINTS];
+    if (floats(o_omega, omega, "omega") != NW || floats(o_omega_dot, omega_dot, "omega_dot") != NW
+        || (args[14] != Py_None && floats(args[14], torque_omega_dot, "torque_omega_dot") != NW)) {
         if (!PyErr_Occurred())
             PyErr_SetString(PyExc_ValueError, "sample_physics: four wheels");
         return NULL;
     }
+    if (args[14] == Py_None)
+        for (int i = 0; i < NW; i++)
+            torque_omega_dot[i] = omega_dot[i];
     const int has_drive = k[K_HAS_DRIVE] != 0.0, has_yaw = k[K_HAS_YAW] != 0.0;
     const Py_ssize_t n_inputs = 6 + (has_drive ? NW : 0) + (has_yaw ? 1 : 0);
     if (PyTuple_GET_SIZE(inputs) != n_inputs) {
@@ -1107,7 +1140,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     double rates[NW], inertia[NW];
     brake_torque_rates(&s, k, t_c, torques, rates);
     for (int i = 0; i < NW; i++)
-        inertia[i] = k[K_INERTIA] * omega_dot[i];
+        inertia[i] = k[K_INERTIA] * torque_omega_dot[i];
     if (k[K_GAIN_CORRECTION] != 0.0 && !glitch)
         update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive, wl, rates, braking);
     const double gain = s.gain_factor;
@@ -1191,7 +1224,8 @@ static int intern_attributes(void)
 
 static PyMethodDef methods[] = {
     {"fit_wheels", py_fit_wheels, METH_VARARGS,
-     "fit_wheels(times, speeds, spike_threshold) -> (t_c, omega, omega_dot, glitch, torque_weights) | None\n\n"
+     "fit_wheels(times, speeds, spike_threshold, torque_window)\n"
+     "-> (t_c, omega, omega_dot, glitch, torque_weights, torque_omega_dot) | None\n\n"
      "FrontEnd._fit_wheels' closed-form quadratic fit; None for degenerate timestamps."},
     {"matched", py_matched, METH_VARARGS,
      "matched(ts, vs, times, weights, floor) -> float: FrontEnd._matched's weighted sum of a series\n"
@@ -1207,7 +1241,7 @@ static PyMethodDef methods[] = {
      "_MessageHistory.value_at(t, name) gives: None when the signal has no series yet."},
     {"sample_physics", (PyCFunction)(void (*)(void))py_sample_physics, METH_FASTCALL,
      "sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,\n"
-     "wheel_times, torque_weights, ref, ref_fresh) -> FrontEndResult: FrontEnd._compute_sample after the\n"
+     "wheel_times, torque_weights, ref, ref_fresh, torque_omega_dot) -> FrontEndResult: FrontEnd._compute_sample after the\n"
      "fit and the inputs, reading and updating the FrontEnd's state attributes."},
     {NULL, NULL, 0, NULL},
 };

@@ -269,8 +269,13 @@ class FrontEnd:
         # can change within a sample: at 20 ms (50 Hz wheel speeds) a wheel recovering from deep
         # slip and overshooting is sampled as a zig-zag of ~10 rad/s on both front wheels alike.
         self.glitch_threshold = options.spike_threshold + SUSPECT_JERK_RADPS3 * self.sample_period_s ** 2
-        self.derivative_window = options.derivative_window or max(
-            5, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
+        # The wheels' fit spans `derivative_span_s` but takes at least 5 samples (the glitch test
+        # needs two on each side); the ω̇ the torques are set against in μ spans only the samples
+        # within `derivative_span_s` (3 at 20 ms): averaged over 80 ms, the top of an ABS cycle
+        # read μ 0.038 low at 50 Hz, over 40 ms 0.016.
+        span_samples = max(3, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
+        self.derivative_window = options.derivative_window or max(5, span_samples)
+        self.torque_window = options.derivative_window or span_samples
         # Each canonical signal's history, looked up once here rather than by message per value.
         self._source = {name: self._history[m] for name, m in self._signal_message.items()}
         # Per wheel: the side of the car (−1 left) and half its axle's track.
@@ -349,6 +354,7 @@ class FrontEnd:
         self._low_unbraked_s = [0.0] * 4
         self._dead = [False] * 4
         self._torque_weights: list[float] | None = None
+        self._torque_omega_dot: list[float] | None = None   # the ω̇ those weights go with
         self._trigger_period_s = 0.0
         self._triggers_timed = 0
 
@@ -638,58 +644,35 @@ class FrontEnd:
 
     def _fit_window(self) -> tuple[float, list[float], list[float], bool]:
         """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch), glitch
-        when one wheel's third-newest sample is a sensor error (`_glitch_value`).
-
-        Least squares in closed form on plain floats (the normal equations of a 3-parameter fit
-        in the time offset scaled to [−1, 1], so they stay well conditioned): a handful of points
-        and four wheels are far too small for numpy's per-call overhead.
+        when one wheel's third-newest sample is a sensor error (`_glitch_value`). Also the ω̇ the
+        brake torques are set against (`_torque_omega_dot`: the same fit over the central
+        `torque_window` samples) and the weights that average the torques as it averages ω̇.
         """
-        if self.core is not None:
-            fitted = self.core.fit_wheels(self._wheel_times, self._wheel_speeds, self.glitch_threshold)
-            if fitted is None:
-                self._torque_weights = None
-                return self._fit_wheels_numpy()
-            t_c, omega, omega_dot, glitch, self._torque_weights = fitted
-            return t_c, omega, omega_dot, glitch
         times = self._wheel_times
+        if self.core is not None:
+            fitted = self.core.fit_wheels(times, self._wheel_speeds, self.glitch_threshold, self.torque_window)
+            if fitted is None:
+                self._torque_weights = self._torque_omega_dot = None
+                return self._fit_wheels_numpy()
+            t_c, omega, omega_dot, glitch, self._torque_weights, self._torque_omega_dot = fitted
+            return t_c, omega, omega_dot, glitch
         n = len(times)
         t_c = float(times[n // 2])
-        tau = [t - t_c for t in times]
-        h = max(abs(tau[0]), abs(tau[-1])) or 1.0
-        u = [x / h for x in tau]
-        u2 = [x * x for x in u]
-        # sum(map(mul, ...)): the same products summed in the same order as a generator of
-        # a * b, without a Python frame per term.
-        s1 = sum(u)
-        s2 = sum(u2)
-        s3 = sum(map(mul, u, u2))
-        s4 = sum(map(mul, u2, u2))
-        # Symmetric 3×3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate.
-        c00 = s2 * s4 - s3 * s3
-        c01 = s2 * s3 - s1 * s4
-        c02 = s1 * s3 - s2 * s2
-        c11 = n * s4 - s2 * s2
-        c12 = s1 * s2 - n * s3
-        c22 = n * s2 - s1 * s1
-        det = n * c00 + s1 * c01 + s2 * c02
-        if not det > 1e-9 * max(n * s2 * s4, 1e-300):
-            self._torque_weights = None
+        fitted = _quadratic_fit(times, self._wheel_speeds, t_c)
+        if fitted is None:
+            self._torque_weights = self._torque_omega_dot = None
             return self._fit_wheels_numpy()
-        inv = 1.0 / det
+        omega, omega_dot, self._torque_weights = fitted
+        self._torque_omega_dot = omega_dot
+        if self.torque_window < n:
+            lo = (n - self.torque_window) // 2
+            hi = lo + self.torque_window
+            inner = _quadratic_fit(list(times)[lo:hi], list(self._wheel_speeds)[lo:hi], t_c)
+            if inner is not None:
+                _, self._torque_omega_dot, weights = inner
+                self._torque_weights = [0.0] * lo + weights + [0.0] * (n - hi)
         threshold = self.glitch_threshold
-        glitch = False
-        omega = []
-        omega_dot = []
-        for y in zip(*self._wheel_speeds):   # each wheel's speeds over the window
-            b0 = sum(y)
-            b1 = sum(map(mul, u, y))
-            b2 = sum(map(mul, u2, y))
-            k0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv
-            k1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv
-            glitch = glitch or _glitch_value(times, y, n - 3, threshold) is not None
-            omega.append(k0)
-            omega_dot.append(k1 / h)
-        self._torque_weights = _matched_weights(times, u, (c01 * inv / h, c11 * inv / h, c12 * inv / h))
+        glitch = any(_glitch_value(times, y, n - 3, threshold) is not None for y in zip(*self._wheel_speeds))
         return t_c, omega, omega_dot, glitch
 
     def _fit_wheels_numpy(self) -> tuple[float, list[float], list[float], bool]:
@@ -786,7 +769,7 @@ class FrontEnd:
                 ref_fresh = ref is not None and self._ref_fresh(t_c)
             return self.core.sample_physics(self, self._physics_constants, _PHYSICS_TYPES, t_c, omega, omega_dot,
                                             glitch, inputs, stale, self._matched_lookups, self._wheel_times,
-                                            self._torque_weights, ref, ref_fresh)
+                                            self._torque_weights, ref, ref_fresh, self._torque_omega_dot)
         accel_long_raw, accel_lat = inputs[0], inputs[1]
         pressures = list(inputs[2:6])
         if accel_long_raw is None or accel_lat is None or None in pressures:
@@ -851,7 +834,8 @@ class FrontEnd:
         loads = veh.normal_forces(accel_long, accel_lat)
         brake_torques, accel_long_matched = self._matched_inputs(pressures, accel_long_raw)
         brake_rates = self._brake_torque_rates(t_c, brake_torques)
-        inertia_torques = [veh.wheel_inertia * float(a) for a in omega_dot]
+        torque_omega_dot = omega_dot if self._torque_omega_dot is None else self._torque_omega_dot
+        inertia_torques = [veh.wheel_inertia * float(a) for a in torque_omega_dot]
         if opts.brake_gain_correction and not glitch:
             # The body's deceleration through the same filter as the torques it is compared with.
             self._update_brake_gain(accel_long_matched - self._accel_bias_mps2,
@@ -1257,6 +1241,47 @@ def _interpolation_plan(ts: list[float], times: list[float], weights: list[float
         coefficients[k - 1] = get(k - 1, 0.0) + w * (1.0 - f)
         coefficients[k] = get(k, 0.0) + w * f
     return list(coefficients.items())
+
+
+def _quadratic_fit(times: Any, rows: Any, t_c: float) -> tuple[list[float], list[float], list[float]] | None:
+    """ω(t_c) and dω/dt(t_c) of each wheel by a local quadratic through `rows` (one 4-tuple of
+    wheel speeds per time), and the weights that average a torque as it averages ω̇
+    (`_matched_weights`); None for timestamps too degenerate for the closed form.
+
+    Least squares in closed form on plain floats (the normal equations of a 3-parameter fit in the
+    time offset scaled to [−1, 1], so they stay well conditioned): a handful of points and four
+    wheels are far too small for numpy's per-call overhead. (`_frontcore.c`'s `quadratic_fit`.)
+    """
+    n = len(times)
+    tau = [t - t_c for t in times]
+    h = max(abs(tau[0]), abs(tau[-1])) or 1.0
+    u = [x / h for x in tau]
+    u2 = [x * x for x in u]
+    # sum(map(mul, ...)): the same products summed in the same order as a generator of
+    # a * b, without a Python frame per term.
+    s1 = sum(u)
+    s2 = sum(u2)
+    s3 = sum(map(mul, u, u2))
+    s4 = sum(map(mul, u2, u2))
+    # Symmetric 3×3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate.
+    c00 = s2 * s4 - s3 * s3
+    c01 = s2 * s3 - s1 * s4
+    c02 = s1 * s3 - s2 * s2
+    c11 = n * s4 - s2 * s2
+    c12 = s1 * s2 - n * s3
+    det = n * c00 + s1 * c01 + s2 * c02
+    if not det > 1e-9 * max(n * s2 * s4, 1e-300):
+        return None
+    inv = 1.0 / det
+    omega = []
+    omega_dot = []
+    for y in zip(*rows):   # each wheel's speeds over the window
+        b0 = sum(y)
+        b1 = sum(map(mul, u, y))
+        b2 = sum(map(mul, u2, y))
+        omega.append((c00 * b0 + c01 * b1 + c02 * b2) * inv)
+        omega_dot.append((c01 * b0 + c11 * b1 + c12 * b2) * inv / h)
+    return omega, omega_dot, _matched_weights(times, u, (c01 * inv / h, c11 * inv / h, c12 * inv / h))
 
 
 def _matched_weights(times, u, coef) -> list[float]:

@@ -50,10 +50,12 @@ def test_the_front_end_says_the_same_on_both_paths(scenario, seed, spike_thresho
 
 
 @needs_core
-def test_fit_wheels_matches_the_float_fit_and_refuses_bad_input():
+@pytest.mark.parametrize("torque_window", [3, 5])
+def test_fit_wheels_matches_the_float_fit_and_refuses_bad_input(torque_window):
     rng = np.random.default_rng(4)
     fe = Pipeline(load_config(default_config_path())).front_end
-    for n in (3, 5, 7, 13):   # (the filter's window keeps the newest 7)
+    fe.torque_window = torque_window
+    for n in (3, 5, 7, 13):
         times = list(np.cumsum(rng.uniform(0.008, 0.012, n)))
         speeds = [tuple(rng.uniform(20, 80, 4)) for _ in range(n)]
         fe._wheel_times.clear()
@@ -62,22 +64,28 @@ def test_fit_wheels_matches_the_float_fit_and_refuses_bad_input():
         fe._wheel_speeds.extend(speeds)
         fe.core = None
         expected = fe._fit_window()   # (the fit alone: `_fit_wheels` also repairs a glitch)
-        weights = fe._torque_weights
-        got = core.fit_wheels(list(fe._wheel_times), list(fe._wheel_speeds), fe.glitch_threshold)
+        weights, torque_omega_dot = fe._torque_weights, fe._torque_omega_dot
+        got = core.fit_wheels(list(fe._wheel_times), list(fe._wheel_speeds), fe.glitch_threshold, torque_window)
         assert got[0] == expected[0]
         np.testing.assert_allclose(got[1], expected[1], rtol=1e-12)
         np.testing.assert_allclose(got[2], expected[2], rtol=1e-9, atol=1e-9)
         assert got[3] == expected[3]
         np.testing.assert_allclose(got[4], weights, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(got[5], torque_omega_dot, rtol=1e-9, atol=1e-9)
         assert sum(got[4]) == pytest.approx(1.0)
+        # Over fewer samples than the window, the torques' weights lie on the central ones only.
+        n = len(fe._wheel_times)   # (the filter's window keeps the newest 5)
+        outside = (n - min(torque_window, n)) // 2
+        assert not any(got[4][:outside]) and not any(got[4][n - outside:])
+        assert (got[5] == got[2]) == (torque_window >= n)
     # All timestamps equal: the closed form cannot be used (the caller falls back to lstsq).
-    assert core.fit_wheels([1.0] * 5, [(1.0, 1.0, 1.0, 1.0)] * 5, 1.0) is None
+    assert core.fit_wheels([1.0] * 5, [(1.0, 1.0, 1.0, 1.0)] * 5, 1.0, 5) is None
     with pytest.raises(ValueError, match="four"):
-        core.fit_wheels([0.0, 0.01, 0.02], [(1.0, 1.0, 1.0)] * 3, 1.0)
+        core.fit_wheels([0.0, 0.01, 0.02], [(1.0, 1.0, 1.0)] * 3, 1.0, 5)
     with pytest.raises(ValueError, match="per time"):
-        core.fit_wheels([0.0, 0.01, 0.02], [(1.0, 1.0, 1.0, 1.0)] * 2, 1.0)
+        core.fit_wheels([0.0, 0.01, 0.02], [(1.0, 1.0, 1.0, 1.0)] * 2, 1.0, 5)
     with pytest.raises(TypeError):
-        core.fit_wheels([0.0, "x", 0.02], [(1.0, 1.0, 1.0, 1.0)] * 3, 1.0)
+        core.fit_wheels([0.0, "x", 0.02], [(1.0, 1.0, 1.0, 1.0)] * 3, 1.0, 5)
 
 
 @needs_core
@@ -269,8 +277,11 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
 def test_sample_physics_refuses_what_it_cannot_read():
     fe = Pipeline(load_config(default_config_path())).front_end
     args = [fe, fe._physics_constants, frontend_module._PHYSICS_TYPES, 1.0, [80.0] * 4, [0.0] * 4, False,
-            (0.0,) * len(fe._sample_inputs), (), fe._matched_lookups, [1.0], None, None, False]
+            (0.0,) * len(fe._sample_inputs), (), fe._matched_lookups, [1.0], None, None, False, None]
     assert core.sample_physics(*args).sample is not None
+    assert core.sample_physics(*args[:14], [0.5] * 4).sample is not None
+    with pytest.raises(ValueError, match="four"):
+        core.sample_physics(*args[:14], [0.5] * 3)
     with pytest.raises(ValueError, match="constants"):
         core.sample_physics(*args[:1], args[1][:-1], *args[2:])
     with pytest.raises(ValueError, match="inputs"):
@@ -280,7 +291,7 @@ def test_sample_physics_refuses_what_it_cannot_read():
     # Its arguments are converted by hand (METH_FASTCALL): each wrong one is refused.
     assert_each_refused(core.sample_physics, args,
                         ((1, list(args[1])), (2, None), (3, "1.0"), (7, list(args[7])), (9, list(args[9]))))
-    assert core.sample_physics(*args[:6], 1, *args[7:13], "yes").sample is not None   # ("p": any truth value)
+    assert core.sample_physics(*args[:6], 1, *args[7:13], "yes", None).sample is not None   # ("p": any truth value)
     fe._dead = [False] * 3
     with pytest.raises(TypeError, match="_dead"):
         core.sample_physics(*args)

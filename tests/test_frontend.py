@@ -538,14 +538,19 @@ def _disagreements(results, t0: float, t1: float = math.inf) -> int:
     return sum(r.fault == "brake pressure disagrees with deceleration" for t, r in results if t0 <= t < t1)
 
 
+def _front_end(compiled: bool) -> FrontEnd:
+    fe = make()
+    if not compiled:
+        fe.core = None
+    return fe
+
+
 @pytest.mark.parametrize("compiled", [True, False])
 def test_a_disagreement_that_ended_does_not_fault_the_next_stop(compiled):
     # Pressures reading 2.5 times what the brakes do are a fault while they last; after the brakes
     # are let go for a while, a stop whose pressures agree with the body starts with a clean slate:
     # the window of that verdict is the last ~0.2 s of braking, not the last braking there was.
-    fe = make()
-    if not compiled:
-        fe.core = None
+    fe = _front_end(compiled)
     needed = _needed_pressure(6.0, 0.03, 25.0)
     results = feed_phases(fe, [(0.6, lambda t: 6.0, lambda t: 2.5 * needed),
                                (0.6, lambda t: 0.1, lambda t: 0.0),
@@ -560,9 +565,7 @@ def test_pressures_below_braking_are_not_judged_against_the_body(compiled):
     # the push-out pressure, below what counts as braking) while the car slows by 1 m/s² for
     # reasons no brake explains (a grade, an accelerometer offset not yet learnt). That is no
     # evidence about the brakes, and the stop that follows must not start with a fault.
-    fe = make()
-    if not compiled:
-        fe.core = None
+    fe = _front_end(compiled)
     needed = _needed_pressure(6.0, 0.03, 25.0)
     offset = VEH.brake_pushout_pressure + 0.5
     results = feed_phases(fe, [(0.8, lambda t: 1.0, lambda t: offset),
@@ -584,9 +587,7 @@ def test_stronger_brakes_seen_through_a_lagging_sensor_are_no_fault(compiled):
         return lambda t: pushout + scale * (needed - pushout) * min(1.0, t / 0.25)
 
     for scale, least, most in ((1 / 1.3, 0, 0), (2.5, 50, 100)):
-        fe = make()
-        if not compiled:
-            fe.core = None
+        fe = _front_end(compiled)
         results = feed_phases(fe, [(0.3, lambda t: 0.1, lambda t: 0.0),
                                    (1.0, lambda t: 6.0 * min(1.0, t / 0.25), pedal(scale))], pressure_lag=0.04)
         assert least <= _disagreements(results, 0.3) <= most, scale

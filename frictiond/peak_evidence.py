@@ -212,6 +212,8 @@ class PeakEvidence:
         n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = stats
         if n < self._min_wheel_samples:
             return "few samples", 0.0, True
+        if not peak_seen and speed < o.peak_evidence_min_speed:
+            return "too slow to show a peak", 0.0, True
         if not peak_seen and not abs_working:
             # Over its peak a tyre gives no more force as the brake torque rises: the wheel
             # runs away into slip (ABS exists to catch this). Steady braking, however bent its

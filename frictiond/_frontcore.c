@@ -145,12 +145,10 @@ static PyObject *py_fit_wheels(PyObject *self, PyObject *args)
         const Py_ssize_t lo = (n - inner) / 2;
         for (Py_ssize_t k = 0; k < n; k++)
             inner_weights[k] = 0.0;
+        /* (a degenerate inner fit returns before writing: the whole window's ω̇ and weights stay) */
         if (quadratic_fit(times, y, n + 1, lo, inner, t_c, inner_omega, torque_omega_dot, inner_weights + lo,
                           scratch))
             torque_weights = inner_weights;
-        else
-            for (int w = 0; w < NW; w++)
-                torque_omega_dot[w] = omega_dot[w];
     }
     int glitch = 0;
     for (int w = 0; w < NW && !glitch; w++)

@@ -133,6 +133,9 @@ class FrontEndOptions:
     # Identify the pressure sensors' lag from the body equation and advance the brake torques by
     # it (`_learn_pressure_lag`); off: the pressures are taken as the brakes' at their instant.
     pressure_lag_compensation: bool = True
+    # Learn the tyre's relaxation length from the μ–slip loops its lag draws under ABS and invert
+    # the lag before the fit (`relaxation`; each sample reaches the estimator one sample late).
+    relaxation_compensation: bool = True
 
 
     def validate(self) -> None:

@@ -15,6 +15,7 @@ from .codec import DecodeFailure, InputCodec, OutputCodec, load_databases
 from .config import Config
 from .frames import Frame
 from .frontend import PRESSURE_NAMES, FrontEnd, FrontEndResult, make_front_end
+from .relaxation import RelaxationCompensator
 from .samples import FrictionEstimate, PhysicalSample, Status
 
 _new_tuple = tuple.__new__
@@ -95,6 +96,7 @@ class Pipeline:
         self._recent_faults: deque[float] = deque()
         self._first_update_s: float | None = None
         self._corrupt_input = False   # the share of corrupted input keeps the status from VALID
+        self.relaxation = RelaxationCompensator(config.frontend.relaxation_compensation)
 
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame) -> list[Frame]:
@@ -159,6 +161,7 @@ class Pipeline:
 
     def _update(self, time_s: float, result: FrontEndResult) -> list[Frame]:
         self.last_result = result
+        result = self._compensated(time_s, result)
         if self._first_update_s is None:
             self._first_update_s = time_s
         if result.stale_messages:
@@ -212,6 +215,25 @@ class Pipeline:
                 self._last_valid = estimate
         self.last_estimate = estimate
         return self._emit(time_s, estimate, self.last_sample)
+
+    def _compensated(self, time_s: float, result: FrontEndResult) -> FrontEndResult:
+        """The front end's result with the sample the estimator is to see: each one sample late,
+        corrected for the tyre's relaxation lag (`relaxation`); none at the first of a run."""
+        if result.sample is None:
+            held = self.relaxation.flush()
+            # The last sample before a short gap still counts; after a silence it describes a
+            # road the car has left (an estimate of it now would be a stale VALID).
+            if (held is not None and not result.stale_messages and result.fault is None
+                    and time_s - held.time_s <= self.config.frontend.max_gap):
+                return replace(result, sample=held)
+            return result
+        compensated = self.relaxation.push(result.sample)
+        if compensated is None or time_s - compensated.time_s > self.config.frontend.max_gap:
+            # (the first of a run: warming up; a held sample from before a silence is dropped)
+            if result.fault is not None:
+                self.stats.faults[result.fault] += 1
+            return replace(result, sample=None, fault=None)
+        return result if compensated is result.sample else replace(result, sample=compensated)
 
     def _emit(self, time_s: float, estimate: FrictionEstimate, sample: PhysicalSample | None) -> list[Frame]:
         stats = self.stats

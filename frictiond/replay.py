@@ -46,6 +46,7 @@ class ReplaySummary:
     period_mismatch: bool = False     # ... far from the DBC's cycle time (`FrontEnd.period_mismatch`)
     rejected: dict = field(default_factory=dict)   # input frames the plausibility gate refused, by kind
     suspect_share: float = 0.0        # ... and its share of rejected/repaired input at the end
+    relaxation_m: float = 0.0         # the tyre's relaxation length learnt (`relaxation`)
 
     def status_seconds(self) -> dict[str, float]:
         period = self.measured_trigger_period_s or self.trigger_period_s
@@ -78,6 +79,9 @@ class ReplaySummary:
             lines.append(f"rejected input    {sum(self.rejected.values())}  (implausible frames, kept from the fit"
                          + "".join(f"; {k}: {v}" for k, v in sorted(self.rejected.items(), key=lambda kv: (-kv[1], kv[0])))
                          + ")")
+        if self.relaxation_m > 0.0:
+            lines.append(f"tyre lag          relaxation length {self.relaxation_m:.2f} m learnt from the μ–slip loops, "
+                         "corrected before the fit")
         if s.faults:
             lines.append("faults            " + "; ".join(f"{k}: {v}" for k, v in s.faults.most_common(5)))
         if s.not_valid:
@@ -124,7 +128,7 @@ def replay_frames(
         pipeline.stats, first, last, pipeline.last_estimate, pipeline.front_end.period_of(pipeline.trigger_message),
         pipeline.input_codec.counter_jumps, pipeline.front_end.skipped_triggers,
         pipeline.front_end.measured_period_s, pipeline.front_end.period_mismatch(),
-        dict(pipeline.front_end.gate.counts), pipeline.front_end.gate.suspect_share(),
+        dict(pipeline.front_end.gate.counts), pipeline.front_end.gate.suspect_share(), pipeline.relaxation.sigma_m,
     )
 
 

@@ -125,3 +125,9 @@ def test_a_relaxing_tyre_under_abs_is_not_valid_low():
     off = sum(abs(e.mu_max - m) > 0.2 * m for e, m in zip(valid, truth))
     assert off <= 0.01 * max(len(valid), 1)
     assert pipeline.relaxation.sigma_m > 0.1
+    # The replay summary says what was learnt.
+    from frictiond.pipeline import Pipeline
+    from frictiond.replay import replay_frames
+
+    summary = replay_frames(Pipeline(stop.config("lugre-tr")), stop.frames).format()
+    assert f"relaxation length {pipeline.relaxation.sigma_m:.2f} m" in summary

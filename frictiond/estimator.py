@@ -1171,10 +1171,20 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
 
     def _hold(self, now_s: float, speed: float, fitted: tuple | None = None) -> FrictionEstimate:
-        """No fresh excitation: keep a recent VALID for `hold_s`, then say NOT_EXCITED."""
+        """No fresh excitation: keep a recent VALID for `hold_s`, then say NOT_EXCITED.
+
+        While the car still moves at a speed where data can show a peak, only a VALID still
+        standing is kept: once an update has published something else after it (the fit no
+        longer backing it), it is not brought back. With every wheel deep in slip on a new road
+        (wet to ice at 110 km/h: no sample usable, the window aging out), it came back for a
+        second at 7 times the ice's grip. As a stop ends (below `peak_evidence_min_speed`, where
+        no slip is evidence), its VALID is held as before: the road is the same."""
         o = self.options
         last = self._last_valid
-        if last is not None and now_s - self._last_excited_s <= o.hold_s:
+        previous = self._last_estimate
+        withdrawn = (speed >= o.peak_evidence_min_speed and last is not None and previous is not None
+                     and previous.status != Status.VALID and previous.time_s > last.time_s)
+        if last is not None and not withdrawn and now_s - self._last_excited_s <= o.hold_s:
             return FrictionEstimate(now_s, Status.VALID, last.mu_max, last.slip_at_mu_max, last.theta,
                                     last.confidence, last.wheel_mu_max, last.mu_max_std, dict(last.detail))
         if last is not None:

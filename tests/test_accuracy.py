@@ -44,8 +44,9 @@ LIMITS = {
     # Burckhardt ice: μ_max 0.034, already 96 % of it at 1 % slip (a plateau, ABS holds 1-2 %).
     "ice": (0.005, 0.08, 0.9, 0.3, None),
     # The same ice at 35 m/s (μ_max 0.026): the ABS holds the wheels past the peak at nearly
-    # constant slip, which stays evidence of the peak once the stop has shown it.
-    "ice_fast": (0.004, 0.08, 0.95, 0.3, None),
+    # constant slip, which stays evidence of the peak once the stop has shown it. (A VALID once
+    # withdrawn is not held again when no sample is usable: 0.955 → 0.941 here.)
+    "ice_fast": (0.004, 0.08, 0.93, 0.3, None),
     # A car 25 % heavier than configured: the body equation's brake-gain check absorbs it.
     "loaded": (0.025, 0.035, 0.95, 0.3, None),
     # Rough road: noisier wheel speeds and μ samples; VALID over nearly all the stop.

@@ -480,6 +480,23 @@ def test_a_deceleration_abs_releasing_below_a_soft_peak_gives_no_wrong_valid():
     assert any(e.detail and e.detail.get("excitation", 0.0) > 0 for e in estimates)
 
 
+def test_a_withdrawn_valid_is_not_held_again_when_no_sample_is_usable():
+    # The campaign's development stop 535: a slip-threshold ABS, wet Magic Formula road, then ice
+    # at 110 km/h. On the ice every wheel runs deep into slip (none usable); the window aged out
+    # of its last CONVERGING fit and the hold brought back the wet road's VALID 0.59 for a second,
+    # 7 times the ice's 0.08 (59 of 74 VALID outputs).
+    from frictiond.campaign.score import estimator_scores
+
+    stop, estimates = campaign_stop_estimates(535)
+    assert stop.spec.jump_kind == "to-ice"
+    scores = estimator_scores(estimates, stop.truth)
+    assert scores["false_valid"] == 0
+    # ... and the statuses never go VALID → not VALID → VALID without a fit in between.
+    for before, between, after in zip(estimates, estimates[1:], estimates[2:]):
+        if before.status == Status.VALID and between.status != Status.VALID and after.status == Status.VALID:
+            assert after.mu_max != before.mu_max
+
+
 def test_a_third_change_of_road_within_seconds_ends_valid_until_they_stop():
     # The road's residual bias flips every 0.7 s (a tyre the static model does not describe is
     # indistinguishable from this): the first two detections may be a road change and its rear

@@ -392,3 +392,32 @@ def test_zeros_that_go_on_are_what_the_sensors_read_not_a_marker():
     gate = InputGate(VEH, {"WHEELS": 0.01})
     assert [gate.admit(t, "WHEELS", v) for t, v in ((0.0, moving), (0.01, locked), (0.02, moving))] == \
         [None, "marker", None]
+
+
+def test_the_corruption_benchmark_pairs_outputs_valid_in_both_runs(default_config):
+    # `benchmarks/corruption.py`'s paired ΔMAE: only outputs VALID at the same instant in both
+    # runs count, so corruption that withdraws a stop's accurate outputs moves ΔMAE but not it.
+    import importlib.util
+    import sys
+
+    from .conftest import REPO
+
+    spec = importlib.util.spec_from_file_location("corruption_bench", REPO / "benchmarks" / "corruption.py")
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = bench   # (its dataclasses look their module up there)
+    spec.loader.exec_module(bench)
+    clean, corrupt = bench.Outcome(), bench.Outcome()
+    clean.errors = {1000: 0.01, 1010: 0.02, 1020: 0.03}
+    corrupt.errors = {1010: 0.05, 1020: 0.03, 1030: 0.40}
+    assert corrupt.paired_dmae(clean) == pytest.approx((0.05 - 0.02) / 2)
+    assert math.isnan(bench.Outcome().paired_dmae(clean))
+    # judge() keys each VALID output's error by its time in ms, as the clean run's are keyed.
+    frames, sim = simulate_frames(default_config, "wet", seed=1)
+    rows = sim.truth.rows()
+    t = np.array([r["time_s"] for r in rows])
+    mu = np.array([r["mu_max"] for r in rows])
+    stop = bench.Stop("wet/1", frames, bench._truth_of(t, mu), default_config)
+    out = bench.judge(stop, frames)
+    assert out.valid == len(out.errors) > 100
+    assert out.paired_dmae(out) == 0.0
+    assert sum(out.errors.values()) == pytest.approx(out.abs_error)

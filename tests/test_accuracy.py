@@ -8,7 +8,6 @@ span, converged within 0.3 s, re-converged within 0.5 s after a μ jump, false V
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import math
 import statistics
 
@@ -21,11 +20,9 @@ from frictiond.pipeline import Pipeline
 from frictiond.replay import ReplayRecorder, replay_frames
 from frictiond.sim_frames import simulate_frames
 
-from .conftest import REPO
+from .conftest import load_benchmark
 
-_spec = importlib.util.spec_from_file_location("accuracy_bench", REPO / "benchmarks" / "accuracy.py")
-_bench = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_bench)
+_bench = load_benchmark("accuracy")
 CASES = {c[0]: c[1:] for c in _bench.CASES}
 
 # case: (max MAE, max relative MAE, min VALID share, max convergence s, max re-convergence s)

@@ -231,12 +231,9 @@ def test_the_target_table_passes_and_fails_on_the_issue_thresholds():
 
 
 def test_the_reproduce_command_prints_scores_and_replay_commands(tmp_path, capsys):
-    import importlib.util
+    from .conftest import load_benchmark
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "campaign.py"
-    spec = importlib.util.spec_from_file_location("campaign_cli", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_benchmark("campaign")
     assert module.main(["--reproduce", "1000002", "--write-log", str(tmp_path / "d")]) == 0
     out = capsys.readouterr().out
     assert "seed 1000002:" in out and "lugre-tr" in out and "burckhardt-rls" in out

@@ -397,15 +397,9 @@ def test_zeros_that_go_on_are_what_the_sensors_read_not_a_marker():
 def test_the_corruption_benchmark_pairs_outputs_valid_in_both_runs(default_config):
     # `benchmarks/corruption.py`'s paired ΔMAE: only outputs VALID at the same instant in both
     # runs count, so corruption that withdraws a stop's accurate outputs moves ΔMAE but not it.
-    import importlib.util
-    import sys
+    from .conftest import load_benchmark
 
-    from .conftest import REPO
-
-    spec = importlib.util.spec_from_file_location("corruption_bench", REPO / "benchmarks" / "corruption.py")
-    bench = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = bench   # (its dataclasses look their module up there)
-    spec.loader.exec_module(bench)
+    bench = load_benchmark("corruption")
     clean, corrupt = bench.Outcome(), bench.Outcome()
     clean.errors = {1000: 0.01, 1010: 0.02, 1020: 0.03}
     corrupt.errors = {1010: 0.05, 1020: 0.03, 1030: 0.40}

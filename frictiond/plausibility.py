@@ -21,7 +21,10 @@ A frame that breaks any of them is rejected whole (a random payload rarely break
 signal) and counted by kind. After it is accepted, `repair_spike` looks back one frame: a value
 that disagrees with both its neighbours, which agree with each other, is replaced by their
 interpolation (wheel speeds are judged in the front end's derivative filter instead, where the
-wheel's physics is known).
+wheel's physics is known). A spike within the rate limit of the frame before it makes the
+genuine frame after it look too fast: that frame is rejected for its rate, but when it fits the
+frame before the spike, the spike is revoked instead (`_revoke_spike`). Both note the span a
+sample may have taken the wrong value from (`repaired`).
 
 `suspect_share` is the share of input frames in about the last second that were rejected or
 repaired (exact repeats and reordered frames of a regular stream excepted: they carry no wrong
@@ -111,8 +114,9 @@ def signal_limits(vehicle: VehicleParams) -> dict[str, SignalLimit]:
         limits[f"wheel_speed_{w}"] = SignalLimit(0.0, 400.0, wheel_accel_bound(vehicle, i), 1.0,
                                                  rise=wheel_accel_bound(vehicle, i, up=True), active=1.0)
         limits[f"brake_pressure_{w}"] = SignalLimit(-1.0, 350.0, MAX_PRESSURE_RATE_BAR_S, 3.0, 15.0, active=5.0)
-        # (a motor's torque steps within a few ms: only the range and wild jumps)
-        limits[f"drive_torque_{w}"] = SignalLimit(-5000.0, 5000.0, 200_000.0, 200.0)
+        # (a motor's torque steps within a few ms: the range, wild jumps, and one frame out and
+        # back, which no drive line does within a cycle)
+        limits[f"drive_torque_{w}"] = SignalLimit(-5000.0, 5000.0, 200_000.0, 200.0, 300.0)
     return limits
 
 
@@ -208,6 +212,9 @@ class InputGate:
         # An accepted frame found to be a second source's once the genuine one arrived (message:
         # its time): the caller takes it out of its histories and clears the entry.
         self.revoked: dict[str, float] = {}
+        # (before, after): the times of the neighbours of a value found wrong after it was taken
+        # (a spike repaired or revoked): a sample between them may have used it (the caller clears).
+        self.repaired: deque[tuple[float, float]] = deque(maxlen=64)
 
     # -- the suspect share -------------------------------------------------------------------
     def note(self, time_s: float, kind: str | None) -> None:
@@ -346,6 +353,8 @@ class InputGate:
             kind = self._choose_source(time_s, message, track, values, kind)
         if kind is None:
             kind = self._values(time_s, track, values)
+            if kind == "rate" and self._revoke_spike(message, track, time_s, values):
+                kind = self._values(time_s, track, values)
             # (zeros that go on are what the sensors read, not a marker: four wheels locked
             # below an ABS's cut-out speed, the car skidding to rest)
             if kind in ("rate", "marker") and self._follows_new_level(time_s, track, values):
@@ -379,6 +388,39 @@ class InputGate:
             if kind is None or kind in HARMLESS:
                 self._share_bad += 1.0
         return kind
+
+    def _revoke_spike(self, message: str, track: _Track, time_s: float, values: Mapping[str, float]) -> bool:
+        """A frame rejected for its rate against the last accepted one, but within the rate
+        limits of the one before: when the last accepted frame leaves both its neighbours (a
+        spike within the rate limit of its predecessor, which made the genuine frame after it
+        look too fast), it is revoked (counted as a spike; the caller takes it out of its
+        histories) and the track goes on from the frame before it. True when it was."""
+        accepted = track.accepted
+        if track.rival or len(accepted) < 2 or accepted[-1][0] != track.time_s:
+            return False
+        before_time, before_values = accepted[-2]
+        last_time, last_values = accepted[-1]
+        if not before_time < last_time < time_s or not self._agrees(time_s, values, accepted[-2]):
+            return False
+        spike = False
+        for name, b in last_values.items():
+            a, c = before_values.get(name), values.get(name)
+            tolerance = self._spike.get(name)
+            if a is None or c is None or tolerance is None:
+                continue
+            # (off both neighbours, each by more than they are apart: the one frame that does not fit)
+            if min(abs(b - a), abs(b - c)) > max(tolerance, abs(c - a)):
+                spike = True
+                break
+        if not spike:
+            return False
+        accepted.pop()
+        track.time_s, track.values = accepted[-1]
+        self.revoked[message] = last_time
+        self.repaired.append((before_time, time_s))
+        self.counts["spike"] += 1
+        self._share_bad += 1.0   # (it was counted as accepted)
+        return True
 
     def _follows_new_level(self, time_s: float, track: _Track, values: Mapping[str, float]) -> bool:
         """A frame rejected for its rate or as a marker: whether enough rejected frames in a row
@@ -646,6 +688,7 @@ class InputGate:
             if abs(b - mid) > spike and abs(c - a) < 0.5 * spike and (b - a) * (b - c) > 0.0:
                 values[-2] = mid
                 repaired = True
+                self.repaired.append((ta, tc))
         if repaired:
             self.counts["spike"] += 1
             # (the frame was counted as accepted: now it counts as suspect)

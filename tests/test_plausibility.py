@@ -8,7 +8,7 @@ import pytest
 
 from frictiond import corruption
 from frictiond.faults import replay_on_bus
-from frictiond.frontend import PRESSURE_NAMES, WHEEL_SPEED_NAMES
+from frictiond.frontend import DRIVE_TORQUE_NAMES, PRESSURE_NAMES, WHEEL_SPEED_NAMES
 from frictiond.input_quality import LEAVE_VALID_SHARE, confidence_factor, leaves_valid
 from frictiond.pipeline import Pipeline
 from frictiond.plausibility import InputGate, wheel_accel_bound
@@ -115,6 +115,32 @@ def test_pressure_spike_between_agreeing_neighbours_is_repaired():
     assert fe.gate.counts["spike"] == 1
     times, values = fe._history["PRESS"].series["brake_pressure_fl"]
     assert max(values) < 61.5
+
+
+def test_a_spike_that_made_the_genuine_frame_after_it_look_too_fast_is_revoked():
+    # A drive torque (0 N·m: braking) corrupted to −2,200 N·m for one frame: within one frame's
+    # rate limit of the frame before, so taken; the genuine 0 after it is then too far from it
+    # for its 9 ms. It fits the frame before the spike: the spike goes, not the genuine frame.
+    gate = InputGate(VEH, {"TORQUE": 0.01})
+    zero = dict.fromkeys(DRIVE_TORQUE_NAMES, 0.0)
+    assert gate.admit(0.000, "TORQUE", zero) is None
+    assert gate.admit(0.010, "TORQUE", zero) is None
+    assert gate.admit(0.021, "TORQUE", dict(zero, drive_torque_fl=-2200.0)) is None
+    assert gate.admit(0.030, "TORQUE", zero) is None
+    assert gate.revoked == {"TORQUE": 0.021}
+    assert gate.counts["spike"] == 1 and list(gate.repaired) == [(0.010, 0.030)]
+    assert gate.suspect_share() == pytest.approx(1 / 4, rel=0.02)   # (one of four frames in 30 ms)
+
+
+def test_a_genuine_frame_is_not_revoked_for_a_wild_frame_after_it():
+    # The wild frame agrees with the one two frames back only because 40 ms allow a lot of jerk;
+    # the genuine frame between them is near its predecessor: the wild one is the odd one out.
+    gate = InputGate(VEH, {"ACCEL": 0.02})
+    a = {"accel_long": -4.0, "accel_lat": 1.5, "yaw_rate": 0.04}
+    assert gate.admit(0.00, "ACCEL", a) is None
+    assert gate.admit(0.02, "ACCEL", dict(a, accel_long=-4.02)) is None
+    assert gate.admit(0.04, "ACCEL", dict(a, accel_long=20.25, accel_lat=15.6)) == "rate"
+    assert not gate.revoked and not gate.repaired and gate.counts["spike"] == 0
 
 
 def test_input_quality_costs_confidence_and_leaves_valid_with_hysteresis():

@@ -527,7 +527,7 @@ class FrontEnd:
         # (what this sample will teach, as it was: put back if its frame is revoked, `_take_back`)
         self._before_sample = (time_s, self._speed_estimate_mps, self._speed_time_s, self._last_sample_time_s,
                                [getattr(self, name) for name in _LEARNT_STATE])
-        if self._newest_suspect() or self.gate.contested(time_s):
+        if self._newest_suspect() or self.gate.contested(time_s) or self._input_lost(time_s):
             result = self._suspect_sample(stale)
         else:
             result = self._compute_sample(stale)
@@ -539,11 +539,24 @@ class FrontEnd:
             result.sample.input_suspect_share = self.gate.suspect_share()
         return result
 
+    def _input_lost(self, now_s: float) -> bool:
+        """Whether the sample's instant lies past a required message's last frame while that
+        message's next frame is overdue (lost, or rejected by the gate): its value would be the
+        last one held, not what the brakes or the body did then (a pressure under ABS moves by
+        tens of bar in a cycle)."""
+        times = self._wheel_times
+        t_c = times[len(times) // 2]
+        trigger = self.trigger_message
+        for m, h in self._required_histories:
+            if m != trigger and t_c > h.last_arrival_s and now_s - h.last_arrival_s > 1.25 * h.period_s:
+                return True
+        return False
+
     def _suspect_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         """`_compute_sample` for a suspect sample: a wheel's newest samples are off its own trend
         by more than a wheel's acceleration can change (maybe a glitch not yet confirmed: that
-        takes two more samples; its weight in the derivative is largest now), or a second node
-        sends one of the inputs. Not fitted, and it teaches the front end nothing: the learnt
+        takes two more samples; its weight in the derivative is largest now), a second node
+        sends one of the inputs, or an input's frame for the sample's instant is overdue. Not fitted, and it teaches the front end nothing: the learnt
         state is put back and the speed estimate coasts on the accelerometer."""
         speed_before = (self._speed_estimate_mps, self._speed_time_s)
         learnt = [getattr(self, name) for name in _LEARNT_STATE]

@@ -143,6 +143,31 @@ def test_a_genuine_frame_is_not_revoked_for_a_wild_frame_after_it():
     assert not gate.revoked and not gate.repaired and gate.counts["spike"] == 0
 
 
+def test_a_sample_past_a_lost_pressure_frame_is_not_fitted():
+    # Two pressure frames in a row lost: the samples whose instant lies past the last one that
+    # came would hold a pressure moving at ~600 bar/s (an ABS cycling) at its old value.
+    def run(lost):
+        fe = make()
+        drive = WheelDrive(lambda t, w: w, lambda t: 40.0 + 20.0 * math.sin(10.0 * math.pi * t),
+                           v0=25.0, decel=6.0, slip=0.05)
+        usable = {}
+        for k in range(60):
+            t = k * 0.01
+            w = drive.omega(t)
+            fe.push(t + 0.003, "ACCEL", {"accel_long": -drive.decel, "accel_lat": 0.0, "yaw_rate": 0.0})
+            if k not in lost:
+                fe.push(t + 0.006, "PRESS", dict.fromkeys(PRESSURE_NAMES, drive.fl_pressure(t)))
+            r = fe.push(t + 0.01, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w))
+            if r is not None and r.sample is not None:
+                usable[round(r.sample.time_s, 3)] = r.sample.usable[0]
+        return usable
+
+    clean, lossy = run(()), run((50, 51))
+    assert all(clean.values()) and clean.keys() == lossy.keys()
+    lost_at = [t for t, ok in lossy.items() if not ok]
+    assert lost_at and all(0.496 < t < 0.526 for t in lost_at)
+
+
 def test_input_quality_costs_confidence_and_leaves_valid_with_hysteresis():
     assert confidence_factor(0.0) == 1.0 and confidence_factor(0.03) == 1.0
     assert 0.8 < confidence_factor(0.05) < 1.0 and confidence_factor(0.5) == pytest.approx(0.8)

@@ -399,6 +399,14 @@ class FrontEnd:
     def period_of(self, message: str) -> float:
         return self._history[message].period_s
 
+    def tainted(self, time_s: float) -> bool:
+        """Whether a sample at `time_s` may have used an input value found wrong after it was
+        made (a spike the next frame showed up: `InputGate.repaired`)."""
+        spans = self.gate.repaired
+        while spans and spans[0][1] < time_s - 1.0:
+            spans.popleft()
+        return any(a < time_s < b for a, b in spans)
+
     # -- main entry --------------------------------------------------------------------------
     def push(self, time_s: float, message: str, values: Mapping[str, float]) -> FrontEndResult | None:
         """Feed one decoded message; returns a result only for the trigger message."""
@@ -556,8 +564,9 @@ class FrontEnd:
         """`_compute_sample` for a suspect sample: a wheel's newest samples are off its own trend
         by more than a wheel's acceleration can change (maybe a glitch not yet confirmed: that
         takes two more samples; its weight in the derivative is largest now), a second node
-        sends one of the inputs, or an input's frame for the sample's instant is overdue. Not fitted, and it teaches the front end nothing: the learnt
-        state is put back and the speed estimate coasts on the accelerometer."""
+        sends one of the inputs, or an input's frame for the sample's instant is overdue. Not
+        fitted, and it teaches the front end nothing: the learnt state is put back and the speed
+        estimate coasts on the accelerometer."""
         speed_before = (self._speed_estimate_mps, self._speed_time_s)
         learnt = [getattr(self, name) for name in _LEARNT_STATE]
         result = self._compute_sample(stale)

@@ -225,7 +225,7 @@ class Pipeline:
             # road the car has left (an estimate of it now would be a stale VALID).
             if (held is not None and not result.stale_messages and result.fault is None
                     and time_s - held.time_s <= self.config.frontend.max_gap):
-                return replace(result, sample=held)
+                return replace(result, sample=self._marked_if_tainted(held))
             return result
         compensated = self.relaxation.push(result.sample)
         if compensated is None or time_s - compensated.time_s > self.config.frontend.max_gap:
@@ -233,7 +233,16 @@ class Pipeline:
             if result.fault is not None:
                 self.stats.faults[result.fault] += 1
             return replace(result, sample=None, fault=None)
+        if compensated is not result.sample:
+            compensated = self._marked_if_tainted(compensated)
         return result if compensated is result.sample else replace(result, sample=compensated)
+
+    def _marked_if_tainted(self, held: PhysicalSample) -> PhysicalSample:
+        """A sample held back (`_compensated`): when meanwhile an input value it used was found to
+        be a spike (`FrontEnd.tainted`), it is not fitted and gives no floor."""
+        if not self.front_end.tainted(held.time_s):
+            return held
+        return replace(held, usable=(False, False, False, False), body_mu=math.nan)
 
     def _emit(self, time_s: float, estimate: FrictionEstimate, sample: PhysicalSample | None) -> list[Frame]:
         stats = self.stats

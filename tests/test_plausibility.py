@@ -8,12 +8,12 @@ import pytest
 
 from frictiond import corruption
 from frictiond.faults import replay_on_bus
-from frictiond.frontend import DRIVE_TORQUE_NAMES, PRESSURE_NAMES, WHEEL_SPEED_NAMES
+from frictiond.frontend import DRIVE_TORQUE_NAMES, PRESSURE_NAMES, WHEEL_SPEED_NAMES, FrontEndResult
 from frictiond.input_quality import LEAVE_VALID_SHARE, confidence_factor, leaves_valid
 from frictiond.pipeline import Pipeline
 from frictiond.plausibility import InputGate, wheel_accel_bound
 from frictiond.replay import replay_frames
-from frictiond.samples import Status
+from frictiond.samples import PhysicalSample, Status
 from frictiond.sim_frames import input_codec_for, simulate_frames
 from frictiond.vehicle import VehicleParams
 
@@ -166,6 +166,21 @@ def test_a_sample_past_a_lost_pressure_frame_is_not_fitted():
     assert all(clean.values()) and clean.keys() == lossy.keys()
     lost_at = [t for t, ok in lossy.items() if not ok]
     assert lost_at and all(0.496 < t < 0.526 for t in lost_at)
+
+
+def test_a_held_sample_that_used_a_spike_found_later_is_not_fitted(default_config):
+    pipeline = Pipeline(default_config)
+
+    def sample(t):
+        return PhysicalSample(t, 20.0, (0.05,) * 4, (0.5,) * 4, (4000.0,) * 4, (2000.0,) * 4, (True,) * 4,
+                              braking=True, body_mu=0.5)
+
+    assert pipeline._compensated(1.00, FrontEndResult(sample(1.00))).sample is None   # (held)
+    pipeline.front_end.gate.repaired.append((0.995, 1.008))   # a pressure spike at 1.002, shown up at 1.008
+    released = pipeline._compensated(1.01, FrontEndResult(sample(1.01))).sample
+    assert released.time_s == 1.00 and released.usable == (False,) * 4 and math.isnan(released.body_mu)
+    released = pipeline._compensated(1.02, FrontEndResult(sample(1.02))).sample
+    assert released.time_s == 1.01 and released.usable == (True,) * 4 and released.body_mu == 0.5
 
 
 def test_input_quality_costs_confidence_and_leaves_valid_with_hysteresis():

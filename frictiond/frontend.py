@@ -548,15 +548,13 @@ class FrontEnd:
         return result
 
     def _input_lost(self, now_s: float) -> bool:
-        """Whether the sample's instant lies past a required message's last frame while that
-        message's next frame is overdue (lost, or rejected by the gate): its value would be the
-        last one held, not what the brakes or the body did then (a pressure under ABS moves by
-        tens of bar in a cycle)."""
-        times = self._wheel_times
-        t_c = times[len(times) // 2]
+        """Whether a required message's next frame is overdue (lost, or rejected by the gate):
+        the sample's inputs are averaged over the derivative window, which reaches to now, and
+        past the message's last frame its value would be the last one held, not what the brakes
+        or the body did then (a pressure under ABS moves by tens of bar in a cycle)."""
         trigger = self.trigger_message
         for m, h in self._required_histories:
-            if m != trigger and t_c > h.last_arrival_s and now_s - h.last_arrival_s > 1.25 * h.period_s:
+            if m != trigger and now_s - h.last_arrival_s > 1.25 * h.period_s:
                 return True
         return False
 

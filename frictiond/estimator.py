@@ -466,6 +466,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._last_valid: FrictionEstimate | None = None
         self._last_excited_s = -math.inf
         self._last_estimate: FrictionEstimate | None = None
+        self._withdrawn_moving_s = -math.inf   # the last non-VALID update at a speed with evidence (`_hold`)
         self._fits = 0
         self._jumps = 0
         self._jump_times: deque[float] = deque()
@@ -632,6 +633,8 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         else:
             estimate = self._hold(t, v)
         self._last_estimate = estimate
+        if estimate.status != Status.VALID and v >= o.peak_evidence_min_speed:
+            self._withdrawn_moving_s = t   # (`_hold`: what was withdrawn while moving stays withdrawn)
         return estimate
 
     def _residuals(self, x: np.ndarray, slip, speed, mu_meas, sw, wheel, rows_index=None) -> tuple[np.ndarray, np.ndarray]:
@@ -1173,17 +1176,17 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
     def _hold(self, now_s: float, speed: float, fitted: tuple | None = None) -> FrictionEstimate:
         """No fresh excitation: keep a recent VALID for `hold_s`, then say NOT_EXCITED.
 
-        While the car still moves at a speed where data can show a peak, only a VALID still
-        standing is kept: once an update has published something else after it (the fit no
-        longer backing it), it is not brought back. With every wheel deep in slip on a new road
-        (wet to ice at 110 km/h: no sample usable, the window aging out), it came back for a
-        second at 7 times the ice's grip. As a stop ends (below `peak_evidence_min_speed`, where
-        no slip is evidence), its VALID is held as before: the road is the same."""
+        Only a VALID still standing is kept: once an update at a speed where data can show a
+        peak has published something else after it (the fit no longer backing it), it is not
+        brought back, then or later. With every wheel deep in slip on a new road (wet to ice at
+        110 km/h: no sample usable, the window aging out), it came back for a second at 7 times
+        the ice's grip; a VALID withdrawn mid-stop came back at standstill two seconds later, 22 %
+        below a road whose grip rises as the speed falls. As a stop ends (below
+        `peak_evidence_min_speed`, where no slip is evidence), a VALID standing then is held as
+        before, whatever the updates down there say: the road is the same."""
         o = self.options
         last = self._last_valid
-        previous = self._last_estimate
-        withdrawn = (speed >= o.peak_evidence_min_speed and last is not None and previous is not None
-                     and previous.status != Status.VALID and previous.time_s > last.time_s)
+        withdrawn = last is not None and self._withdrawn_moving_s > last.time_s
         if last is not None and not withdrawn and now_s - self._last_excited_s <= o.hold_s:
             return FrictionEstimate(now_s, Status.VALID, last.mu_max, last.slip_at_mu_max, last.theta,
                                     last.confidence, last.wheel_mu_max, last.mu_max_std, dict(last.detail))

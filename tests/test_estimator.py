@@ -497,6 +497,24 @@ def test_a_withdrawn_valid_is_not_held_again_when_no_sample_is_usable():
             assert after.mu_max != before.mu_max
 
 
+def test_a_valid_withdrawn_mid_stop_is_not_brought_back_at_standstill():
+    # Campaign development stop 427: one VALID at 1.70 s (15 % low), CONVERGING from the next
+    # update on; at 3.70 s, the car at rest, the hold published that VALID again, 22 % below a
+    # road whose grip had risen as the speed fell. A VALID still standing as the stop ends is
+    # held (the road is the same), whatever the updates below the evidence speed said.
+    est = LugreTrustRegionEstimator()
+    slow = est.options.peak_evidence_min_speed - 1.0
+    valid = FrictionEstimate(1.70, Status.VALID, 0.83, 0.2, 1.0, 0.55)
+    est._last_valid, est._last_excited_s = valid, 3.69
+    est._last_estimate = dataclasses.replace(valid, time_s=3.69, status=Status.CONVERGING)
+    assert est._hold(3.70, slow).status == Status.VALID              # (not withdrawn while moving)
+    est._withdrawn_moving_s = 1.71                                     # withdrawn at 1.71 s, moving
+    held = est._hold(3.70, slow)
+    assert held.status == Status.NOT_EXCITED and held.mu_max == 0.83
+    est._last_valid = dataclasses.replace(valid, time_s=3.0)           # a VALID since: held again
+    assert est._hold(3.70, slow).status == Status.VALID
+
+
 def test_a_third_change_of_road_within_seconds_ends_valid_until_they_stop():
     # The road's residual bias flips every 0.7 s (a tyre the static model does not describe is
     # indistinguishable from this): the first two detections may be a road change and its rear

@@ -213,7 +213,8 @@ class InputGate:
         # its time): the caller takes it out of its histories and clears the entry.
         self.revoked: dict[str, float] = {}
         # (before, after): the times of the neighbours of a value found wrong after it was taken
-        # (a spike repaired or revoked): a sample between them may have used it (the caller clears).
+        # (a spike repaired or revoked): a sample between them may have used it (the front end
+        # drops spans older than a second, `FrontEnd.tainted`).
         self.repaired: deque[tuple[float, float]] = deque(maxlen=64)
 
     # -- the suspect share -------------------------------------------------------------------
@@ -414,12 +415,8 @@ class InputGate:
                 break
         if not spike:
             return False
-        accepted.pop()
-        track.time_s, track.values = accepted[-1]
-        self.revoked[message] = last_time
+        self._drop_last_accepted(message, track, "spike")
         self.repaired.append((before_time, time_s))
-        self.counts["spike"] += 1
-        self._share_bad += 1.0   # (it was counted as accepted)
         return True
 
     def _follows_new_level(self, time_s: float, track: _Track, values: Mapping[str, float]) -> bool:
@@ -545,13 +542,19 @@ class InputGate:
     def _revoke(self, message: str, track: _Track, now: float) -> None:
         """The last accepted frame was the second node's: out of the track (back to the one
         before), to the rival's, counted; the caller takes it out of its histories (`revoked`)."""
-        last_time, last_values = track.accepted.pop()
-        track.time_s, track.values = track.accepted[-1]
-        track.rival.append((last_time, last_values))
+        track.rival.append(self._drop_last_accepted(message, track, "second source"))
         track.rival_s = now
-        self.revoked[message] = last_time
-        self.counts["second source"] += 1
+
+    def _drop_last_accepted(self, message: str, track: _Track, kind: str) -> tuple[float, dict[str, float]]:
+        """The last accepted frame out of the track (back to the one before), counted as `kind`
+        and as suspect (it was counted as accepted); the caller takes it out of its histories
+        (`revoked`). Returns it."""
+        last = track.accepted.pop()
+        track.time_s, track.values = track.accepted[-1]
+        self.revoked[message] = last[0]
+        self.counts[kind] += 1
         self._share_bad += 1.0
+        return last
 
     def _unsure(self) -> None:
         """Which of two sources sent a frame is not certain: the next samples are not fitted,
@@ -688,7 +691,8 @@ class InputGate:
             if abs(b - mid) > spike and abs(c - a) < 0.5 * spike and (b - a) * (b - c) > 0.0:
                 values[-2] = mid
                 repaired = True
-                self.repaired.append((ta, tc))
+                if not self.repaired or self.repaired[-1] != (ta, tc):   # (once per frame, not per signal)
+                    self.repaired.append((ta, tc))
         if repaired:
             self.counts["spike"] += 1
             # (the frame was counted as accepted: now it counts as suspect)

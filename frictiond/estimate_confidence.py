@@ -103,7 +103,10 @@ class EstimateConfidence:
         wheel at its peak. On one road the others' fits follow it (they share the road), but on
         split μ a wheel on the grippy side, its slip held far below its peak (a slip target
         short of a cobblestone's peak at 0.4), contributes an extrapolation: VALID with a mean
-        as wrong as that. So μ_max is compared with the mean the shown wheels' peaks alone give.
+        as wrong as that. So μ_max is compared with the mean the shown wheels' peaks alone give,
+        and with the one where such a wheel takes the peak of the wheel in its track, if shown
+        (a rear wheel rolls where the front one rolled: on split μ the shown wheels' mean mixes
+        both roads and can agree with an extrapolation by chance).
         """
         o = self.options
         hold = o.wheel_evidence_hold_s
@@ -115,8 +118,12 @@ class EstimateConfidence:
         reference = sum(w * m for w, m, s in zip(share, wheel_mu, shown) if s) / max(shown_weight, 1e-9)
         total = max(sum(share), 1e-9)
         published = sum(w * m for w, m in zip(share, wheel_mu)) / total
-        if_shown = sum(w * (m if s else reference) for w, m, s in zip(share, wheel_mu, shown)) / total
-        return abs(published - if_shown) > o.unshown_wheel_tolerance * max(if_shown, 1e-6)
+        for by_track in (False, True):    # (wheel i ^ 2: the other axle's on the same side)
+            if_shown = sum(w * (m if s else (wheel_mu[i ^ 2] if by_track and shown[i ^ 2] else reference))
+                           for i, (w, m, s) in enumerate(zip(share, wheel_mu, shown))) / total
+            if abs(published - if_shown) > o.unshown_wheel_tolerance * max(if_shown, 1e-6):
+                return True
+        return False
 
     def _misfit(self, now_s: float) -> bool:
         """Whether `misfit_changes` changes of road were detected within `misfit_window_s`. A real

@@ -667,3 +667,21 @@ def test_a_peak_first_shown_at_walking_pace_is_no_evidence():
     assert max(max(r[f"utilisation_{w}"] for w in ("fl", "fr", "rl", "rr")) for r in stop.truth
                if r["braking"] and r["speed_mps"] > 5.0) < 0.8
     assert estimates and not [e for e in estimates if e.status == Status.VALID]
+
+
+def test_a_wheel_that_has_not_shown_its_peak_takes_the_peak_of_the_wheel_in_its_track():
+    # Campaign seed 2995, split μ (dry left, snow right) under a deceleration-triggered ABS: the
+    # front-left wheel stays at a third of its grip; its fit's peak (0.40) is near the mean of
+    # the shown wheels (0.42, two of them on snow), so VALID was published at 0.39 against a
+    # true mean of 0.57. The rear-left runs in the front-left's track: its peak is the one the
+    # front-left's road has.
+    est = LugreTrustRegionEstimator()
+    now = 5.0
+    est._wheel_shown_s = [-math.inf, now, now, now]             # FL not shown lately
+    est._load_share = [0.3, 0.3, 0.2, 0.2]
+    assert est._leans_on_unshown_wheels(now, [0.40, 0.20, 0.85, 0.20])     # split: the track says 0.85
+    assert not est._leans_on_unshown_wheels(now, [0.80, 0.82, 0.78, 0.81])  # one road: no difference
+    # Without a shown wheel in its track, the shown wheels' mean is the reference, as before.
+    est._wheel_shown_s = [-math.inf, now, -math.inf, now]
+    assert not est._leans_on_unshown_wheels(now, [0.22, 0.20, 0.21, 0.20])
+    assert est._leans_on_unshown_wheels(now, [0.60, 0.20, 0.60, 0.20])

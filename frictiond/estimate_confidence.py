@@ -13,9 +13,11 @@ from typing import Sequence
 import numpy as np
 
 from . import input_quality
-from .samples import WHEELS
+from .samples import LEFT_WHEELS, RIGHT_WHEELS, WHEELS
 
 N_WHEELS = len(WHEELS)
+# Each wheel's partner in its track: the other axle's wheel on the same side.
+_IN_TRACK = {a: b for side in (LEFT_WHEELS, RIGHT_WHEELS) for a, b in (side, side[::-1])}
 # Bands of slip, as multiples of a wheel's fitted peak slip, in which `_excess_over_fit` averages
 # the data's excess over the fitted curve: narrow around the peak, wider past it.
 _MISFIT_SLIP_BANDS = np.array([0.5, 0.75, 0.9, 1.1, 1.4, 2.0, 3.0])
@@ -118,9 +120,10 @@ class EstimateConfidence:
         reference = sum(w * m for w, m, s in zip(share, wheel_mu, shown) if s) / max(shown_weight, 1e-9)
         total = max(sum(share), 1e-9)
         published = sum(w * m for w, m in zip(share, wheel_mu)) / total
-        for by_track in (False, True):    # (wheel i ^ 2: the other axle's on the same side)
-            if_shown = sum(w * (m if s else (wheel_mu[i ^ 2] if by_track and shown[i ^ 2] else reference))
-                           for i, (w, m, s) in enumerate(zip(share, wheel_mu, shown))) / total
+        by_mean = [reference] * N_WHEELS
+        by_track = [wheel_mu[_IN_TRACK[i]] if shown[_IN_TRACK[i]] else reference for i in range(N_WHEELS)]
+        for stand_in in (by_mean, by_track):
+            if_shown = sum(w * (m if s else x) for w, m, s, x in zip(share, wheel_mu, shown, stand_in)) / total
             if abs(published - if_shown) > o.unshown_wheel_tolerance * max(if_shown, 1e-6):
                 return True
         return False

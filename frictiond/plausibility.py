@@ -15,7 +15,9 @@ fit), `InputGate.admit` checks them against
   message's cycle (a second node sending the same message). Then the two senders' frames are
   told apart by their values and cycles (`_choose_source`): the genuine one is followed, the
   other's frames are rejected, and a frame taken before the other showed it up is revoked
-  (`revoked`: the front end takes it out of its histories).
+  (`revoked`: the front end takes it out of its histories). Two senders whose first frames
+  matched (a replay of a flat stretch) were never told apart: once their values part, every
+  frame is a judgement (`contested`) for as long as both send.
 
 A frame that breaks any of them is rejected whole (a random payload rarely breaks only one
 signal) and counted by kind. After it is accepted, `repair_spike` looks back one frame: a value
@@ -165,7 +167,8 @@ class _Track:
     """One message's accepted history as the gate sees it."""
 
     __slots__ = ("period_s", "time_s", "values", "arrival_s", "arrival_gap_s", "interval_s", "rejects", "last_reject",
-                 "recent", "arrivals", "rejected", "agreeing", "accepted", "rival", "rival_s", "cadence_s")
+                 "recent", "arrivals", "rejected", "agreeing", "accepted", "rival", "rival_s", "cadence_s",
+                 "identified")
 
     def __init__(self, period_s: float) -> None:
         self.period_s = period_s
@@ -187,6 +190,10 @@ class _Track:
         self.rival: deque[tuple[float, dict[str, float]]] = deque(maxlen=2)      # a second source's last frames
         self.rival_s = -math.inf                # (bus time) of its last frame
         self.cadence_s = period_s               # the sender's own cycle, as measured before a second one came
+        # Whether the genuine sender was told apart from a second one when that one's first frame
+        # came: a replay of a flat stretch matches the genuine frames, so which track is followed
+        # is then chance, and when the two part later each continues its own track.
+        self.identified = True
 
 
 class InputGate:
@@ -515,6 +522,7 @@ class InputGate:
             keep = self._misfit(track, before, last_time, last_values) + rival
             swap = self._misfit(track, before, time_s, values) + self._misfit(track, track.rival, last_time, last_values)
             if self._newer_is_genuine(message, track, keep, swap):
+                self._doubt_unidentified(track, values, None)
                 return None
             kind = "second source"
         else:
@@ -522,10 +530,22 @@ class InputGate:
             kind = None if genuine <= rival else "second source"
             if not _clear(genuine, rival):
                 self._unsure()
+        self._doubt_unidentified(track, values, kind)
         if kind is not None:
             track.rival.append((time_s, dict(values)))
             track.rival_s = now
         return kind
+
+    def _doubt_unidentified(self, track: _Track, values: Mapping[str, float], kind: str | None) -> None:
+        """Two senders never told apart (`_Track.identified`) whose values have parted: each
+        frame fits its own track, so which one is genuine is a judgement (`_unsure`) as long
+        as both send: a replay of a flat accelerometer, followed by chance, stays flat through
+        a brake onset that the genuine frames show."""
+        if track.identified:
+            return
+        other = track.values if kind is not None else track.rival[-1][1] if track.rival else None
+        if other is None or self._distance(values, other) > SOURCES_DIFFER:
+            self._unsure()
 
     def _newer_is_genuine(self, message: str, track: _Track, keep: float, swap: float) -> bool:
         """The accepted frame and a newer one, one of them a second node's: `keep` the misfit of
@@ -569,12 +589,14 @@ class InputGate:
         track.rival_s = self._bus_time_s
         accepted = track.accepted
         if len(accepted) < 2 or accepted[-1][0] != track.time_s:
+            track.identified = False
             track.rival.append((time_s, dict(values)))
             return "second source"
         before = list(accepted)[:-1]
         last_time, last_values = accepted[-1]
         last = self._misfit(track, before, last_time, last_values)
         new = self._misfit(track, before, time_s, values)
+        track.identified = min(last, new) <= FITS and abs(last - new) > SOURCES_DIFFER
         if self._newer_is_genuine(message, track, last, new):
             return None
         track.rival.append((time_s, dict(values)))
@@ -648,6 +670,16 @@ class InputGate:
         which frames came from it is not certain (one may have been taken before the other
         was seen), so no sample that may include them is fitted."""
         return 0.0 <= time_s - self._contested_s <= CONTEST_S
+
+    def second_source_value(self, name: str, time_s: float) -> float | None:
+        """Signal `name` in the last frame of a second node that sent within `CONTEST_S` before
+        `time_s` (None when none did): with the frame taken, the two candidates for its value."""
+        for track in self._tracks.values():
+            if track.rival and 0.0 <= time_s - track.rival_s <= CONTEST_S:
+                value = track.rival[-1][1].get(name)
+                if value is not None and math.isfinite(value):
+                    return value
+        return None
 
     def persistent(self, message: str) -> str | None:
         """The kind of rejection when a message's frames keep being rejected (5 in a row, or 8

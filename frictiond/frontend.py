@@ -572,7 +572,7 @@ class FrontEnd:
             setattr(self, name, value)
         if result.sample is not None:
             result.sample.usable = (False, False, False, False)
-            self._coast_speed(speed_before, result.sample.time_s)
+            self._coast_speed(speed_before, result.sample)
         return result
 
     def _mark_body_mu(self, sample: PhysicalSample) -> None:
@@ -630,19 +630,46 @@ class FrontEnd:
         t_c, omega, omega_dot, _ = self._fit_window()
         return t_c, omega, omega_dot, True
 
-    def _coast_speed(self, before: tuple[float | None, float | None], time_s: float) -> None:
+    def _coast_speed(self, before: tuple[float | None, float | None], sample: PhysicalSample) -> None:
         """The speed estimate carried over a suspect sample by the accelerometer alone: a
         corrupted or spoofed wheel speed pulls it up (a wheel faster than the estimate), and under
-        ABS nothing pulls it down again for the rest of the stop (every slip would read high)."""
+        ABS nothing pulls it down again for the rest of the stop (every slip would read high).
+
+        While a second node sends the accelerometer's message, the wheels are trusted: the
+        update made with the frame taken keeps their pull, and only its deceleration is
+        exchanged for the one `_accel_of_two_senders` picks."""
         v, t = before
+        time_s = sample.time_s
         if v is None or t is None or self._speed_time_s is None or self._speed_estimate_mps is None:
             return
         accel = self._value("accel_long", time_s)
         if accel is None or not math.isfinite(accel) or not 0.0 < time_s - t <= self.options.max_gap:
             return
+        chosen = self._accel_of_two_senders(accel, sample)
+        if chosen is not None:
+            corrected = self._speed_estimate_mps + (chosen - accel) * (time_s - t)
+            self._speed_estimate_mps = min(max(corrected, 0.0), MAX_SPEED_MPS)
+            return
         coasted = min(max(v + (accel - self._accel_bias_mps2) * (time_s - t), 0.0), MAX_SPEED_MPS)
         # (only ever down to it: a reference sensor or a slower wheel may have said less)
         self._speed_estimate_mps = min(self._speed_estimate_mps, coasted)
+
+    def _accel_of_two_senders(self, taken: float, sample: PhysicalSample) -> float | None:
+        """While a second node sends the accelerometer's message (None when none does): of the
+        value taken and the other sender's, the one nearer the car's deceleration by its tyre
+        forces (the brakes' and the wheels' inertia torques, with drag and rolling resistance:
+        the body equation the brake gain is learnt from). The frame taken may be the second
+        node's: a replay flat at brake onset while the pressures rise and the car decelerates."""
+        other = self.gate.second_source_value("accel_long", self._last_trigger_s)
+        if other is None:
+            return None
+        veh = self.vehicle
+        v = sample.speed_mps
+        forces = sum(sample.tyre_force_n) + veh.drag_area_coefficient * v * v + veh.rolling_resistance * v
+        if not math.isfinite(forces):
+            return None
+        by_forces = -forces / veh.mass + self._accel_bias_mps2
+        return other if abs(other - by_forces) < abs(taken - by_forces) else taken
 
     def _newest_suspect(self) -> bool:
         """Whether a wheel's newest sample, or the one before it, leaves the trend of the samples

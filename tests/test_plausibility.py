@@ -395,6 +395,52 @@ def test_a_revoked_wheel_speed_frame_leaves_no_trace_in_the_front_end():
     assert spoofed._history["WHEELS"].series["wheel_speed_fl"][1][-1] == plain._history["WHEELS"].series["wheel_speed_fl"][1][-1]
 
 
+def _onset_with_a_replayed_accelerometer(phase_s: float | None) -> tuple[float, int]:
+    """A car rolling at 25 m/s brakes from 0.5 s (deceleration and wheel slip rising to 6 m/s²
+    and 8 % within 0.1 s); from 0.3 to 0.7 s a second node sends ACCEL `phase_s` after each
+    genuine frame with the values of 0.5 s before (flat: the car was rolling). Returns the
+    speed estimate's error at 1.5 s and the wheel frames whose samples were contested."""
+    onset, v0 = 0.5, 25.0
+
+    def ramp(t):
+        return min(max((t - onset) / 0.1, 0.0), 1.0)
+
+    def speed(t):
+        r = min(max(t - onset, 0.0), 0.1)
+        return v0 - 6.0 * (r * r / 0.2 + max(t - onset - 0.1, 0.0))
+
+    def accel(t):
+        return {"accel_long": -6.0 * ramp(t), "accel_lat": 0.0, "yaw_rate": 0.0}
+
+    fe = make(messages={m: s for m, s in MESSAGES.items() if m != "REF"})   # (no ground-speed sensor)
+    events = []
+    for k in range(150):
+        t = 0.01 * k
+        w = speed(t) * (1.0 - 0.08 * ramp(t)) / VEH.wheel_radius
+        events += [(t, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w)), (t + 0.003, "ACCEL", accel(t + 0.003)),
+                   (t + 0.006, "PRESS", dict.fromkeys(PRESSURE_NAMES, 60.0 * ramp(t + 0.006)))]
+        if phase_s is not None and 0.3 <= t < 0.7:
+            events.append((t + 0.003 + phase_s, "ACCEL", accel(t + 0.003 + phase_s - 0.5)))
+    contested = 0
+    for t, message, values in sorted(events, key=lambda e: e[0]):
+        fe.push(t, message, values)
+        contested += message == "WHEELS" and fe.gate.contested(t)
+    return fe._speed_estimate_mps - speed(fe._speed_time_s), contested
+
+
+@pytest.mark.parametrize("phase_s", [-0.0002, 0.0002])
+def test_a_replayed_accelerometer_never_told_apart_leaves_no_speed_error_at_brake_onset(phase_s):
+    # Its first frames match the genuine ones (the car rolled steadily): which of the two the gate
+    # follows is chance. At onset the two part, each continuing its own track. The samples while
+    # both send are not fitted, and the speed estimate coasts on the harder deceleration: left
+    # high it would stay high under the brakes (here the replay, followed, gave +0.8 m/s).
+    clean_error, clean_contested = _onset_with_a_replayed_accelerometer(None)
+    error, contested = _onset_with_a_replayed_accelerometer(phase_s)
+    assert clean_contested == 0
+    assert contested >= 10
+    assert error < clean_error + 0.05
+
+
 def test_when_the_followed_sender_falls_silent_the_one_still_sending_is_followed():
     # Two nodes send PRESS, half a cycle apart, at different levels; at 0.5 s the followed one
     # stops. The other is the only sender of the message now: followed after three cycles.

@@ -147,7 +147,10 @@ class Pipeline:
         stale = self.front_end.stale_messages(now_s)
         if not stale:
             return []
-        return self._emit(now_s, self._held_estimate(now_s, Status.INPUT_STALE), None)
+        # (what was last said: the trigger frames after the gap warm the filter up, and they must
+        # not repeat a VALID from before it, whether the loop ticked before them or not)
+        self.last_estimate = self._held_estimate(now_s, Status.INPUT_STALE)
+        return self._emit(now_s, self.last_estimate, None)
 
     # ------------------------------------------------------------------------------------------
     def _held_estimate(self, time_s: float, status: Status) -> FrictionEstimate:

@@ -23,6 +23,7 @@ from frictiond.daemon import Daemon, Overrides, RateGuard
 from frictiond.frames import Frame
 from frictiond.pipeline import Pipeline
 from frictiond.replay import replay_frames
+from frictiond.samples import Status
 from frictiond.sdnotify import SdNotifier
 from frictiond.state import StateFile
 
@@ -120,6 +121,34 @@ def test_live_estimates_equal_replay_then_input_stale(default_config):
     assert tail and all(e["EstimatorStatus"] == "INPUT_STALE" for e in tail)
     assert want[-1]["EstimatorStatus"] == "VALID"
     assert run.daemon.stats.tx_dropped == 0 and run.daemon.stats.flood_dropped == 0
+
+
+def test_after_a_gap_the_warm_up_repeats_no_valid_whether_the_loop_ticked_in_it_or_not(default_config):
+    # The wheel speeds (the trigger) drop out for 0.3 s while the other inputs go on. The daemon's
+    # loop ticks in the gap (INPUT_STALE); `frictiond replay` ticks only on frames. While the
+    # derivative filter warms up again after the gap, both must say the same, and neither may
+    # repeat the VALID from before it (the vcan flood run showed 12 such outputs live).
+    frames = list(braking_frames(default_config, duration_s=3.0))
+    cut = 1000.0 + 2.0
+    kept = [f for f in frames if not (f.can_id == 0xB0 and cut < f.time_s <= cut + 0.3)]
+
+    def statuses_after_the_gap(tick_in_gap: bool) -> list[Status]:
+        pipeline = Pipeline(default_config)
+        out, ticked = [], False
+        for f in kept:
+            if tick_in_gap and not ticked and f.time_s > cut + 0.28:
+                assert pipeline.tick(cut + 0.28)     # (stale by then: an INPUT_STALE output)
+                ticked = True
+            if f.time_s <= cut:
+                pipeline.process(f)
+                continue
+            if pipeline.process(f) and f.can_id == 0xB0:
+                out.append(pipeline.last_estimate.status)
+        return out
+
+    ticked, not_ticked = statuses_after_the_gap(True), statuses_after_the_gap(False)
+    assert ticked[:20] == not_ticked[:20]
+    assert ticked[0] != Status.VALID and Status.VALID in ticked     # (the fit comes back)
 
 
 def test_stopping_one_required_message_gives_input_stale_within_three_periods(default_config):

@@ -591,7 +591,7 @@ class FrontEnd:
             return
         veh = self.vehicle
         v = sample.speed_mps
-        resistance = (veh.drag_area_coefficient * v * v + veh.rolling_resistance * v) / veh.mass
+        resistance = veh.resistance_force(v) / veh.mass
         body = (-(accel - self._accel_bias_mps2) - resistance) / GRAVITY_MPS2
         # The same total from the wheels (brake torques, inertia): a bound must not rest on one
         # sensor alone. Beyond what brake-gain error explains, one of them is wrong: no bound.
@@ -664,8 +664,7 @@ class FrontEnd:
         if other is None:
             return None
         veh = self.vehicle
-        v = sample.speed_mps
-        forces = sum(sample.tyre_force_n) + veh.drag_area_coefficient * v * v + veh.rolling_resistance * v
+        forces = sum(sample.tyre_force_n) + veh.resistance_force(sample.speed_mps)
         if not math.isfinite(forces):
             return None
         by_forces = -forces / veh.mass + self._accel_bias_mps2
@@ -1091,7 +1090,7 @@ class FrontEnd:
         locked = max(0.3, LOCKED_WHEEL_RATIO * speed)
         if speed < opts.min_speed or min(wheel_linear) < locked:
             return
-        drag = veh.rolling_resistance * speed + veh.drag_area_coefficient * speed * speed
+        drag = veh.resistance_force(speed)
         total_force = veh.mass * decel - drag
         other = sum(inertia_torques) - sum(drive)
         # The gain is the mean of each sample's ratio (torque the body equation needs / torque the

@@ -144,7 +144,12 @@ def _flooded(track: "_Track") -> bool:
 def _clear(a: float, b: float) -> bool:
     """Whether two misfits tell which sender a frame is from: both fit (the same values: either
     will do), or one fits and the other clearly does not."""
-    return max(a, b) <= SOURCES_DIFFER or (min(a, b) <= FITS and abs(a - b) > SOURCES_DIFFER)
+    return max(a, b) <= SOURCES_DIFFER or _told_apart(a, b)
+
+
+def _told_apart(a: float, b: float) -> bool:
+    """Whether one of two misfits fits and the other clearly does not."""
+    return min(a, b) <= FITS and abs(a - b) > SOURCES_DIFFER
 
 
 def _predict(frames, time_s: float, period_s: float) -> dict[str, float] | None:
@@ -596,7 +601,7 @@ class InputGate:
         last_time, last_values = accepted[-1]
         last = self._misfit(track, before, last_time, last_values)
         new = self._misfit(track, before, time_s, values)
-        track.identified = min(last, new) <= FITS and abs(last - new) > SOURCES_DIFFER
+        track.identified = _told_apart(last, new)
         if self._newer_is_genuine(message, track, last, new):
             return None
         track.rival.append((time_s, dict(values)))

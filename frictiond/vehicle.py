@@ -49,6 +49,10 @@ class VehicleParams:
             rear_axle * (0.5 + lat_r),
         )
 
+    def resistance_force(self, speed_mps: float) -> float:
+        """Rolling resistance and aerodynamic drag on the car at `speed_mps` [N]."""
+        return self.rolling_resistance * speed_mps + self.drag_area_coefficient * speed_mps * speed_mps
+
     def brake_gain(self, wheel_index: int) -> float:
         return self.brake_gain_front if wheel_index < 2 else self.brake_gain_rear
 

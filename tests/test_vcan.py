@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from frictiond.busio import read_log
+from frictiond.busio import LogWriter, read_log
 from frictiond.codec import output_codec_for
 from frictiond.config import default_config_path, load_config
 from frictiond.daemon import RateGuard
@@ -127,17 +127,12 @@ def past_rate_guard(out: Path, name: str) -> tuple[Path, int]:
     `max_update_rate`, on the frames' bus times): a log of the frames the daemon processed, and
     how many trigger frames the guard dropped."""
     guard = RateGuard(load_config(out / "frictiond.yaml").daemon.max_update_rate)
-    kept, dropped = [], 0
-    for line in (out / f"{name}-capture.log").read_text().splitlines(keepends=True):
-        fields = line.split()      # (time) interface ID#DATA
-        if (len(fields) == 3 and int(fields[2].split("#")[0], 16) == TRIGGER_ID
-                and not guard.allow(float(fields[0].strip("()")))):
-            dropped += 1
-            continue
-        kept.append(line)
+    frames = list(read_log(out / f"{name}-capture.log"))
+    kept = [f for f in frames if f.can_id != TRIGGER_ID or f.is_extended or f.is_remote or guard.allow(f.time_s)]
     path = out / f"{name}-processed.log"
-    path.write_text("".join(kept))
-    return path, dropped
+    with LogWriter(path) as writer:
+        writer.write_all(kept)
+    return path, len(frames) - len(kept)
 
 
 def check_live_equals_replay(out: Path, name: str, codec, original: Path, against_log: bool = True) -> dict:

@@ -539,6 +539,8 @@ class FrontEnd:
             result = self._suspect_sample(stale)
         else:
             result = self._compute_sample(stale)
+            if result.sample is not None and result.sample.braking:
+                self._attach_slip_spread(result.sample)
         if result.fault == "wheel speed glitch":
             self.gate.count_repair(result.fault)
         if result.sample is not None:
@@ -546,6 +548,55 @@ class FrontEnd:
             self._mark_body_mu(result.sample)
             result.sample.input_suspect_share = self.gate.suspect_share()
         return result
+
+    def _attach_slip_spread(self, sample: PhysicalSample) -> None:
+        """`sample.slip_spread`: each wheel's slip at the two ends of the window the torques and
+        ω̇ were averaged over, with the weights that give that average's mean time and spread.
+
+        Under ABS a wheel crosses its peak in one or two samples: μ read through the filter is
+        the mean over that sweep, below the peak wherever the curve bends (by 15–25 % at 50 Hz on
+        a sharp Magic Formula peak). The estimator compares it with the model's mean over the
+        same slips. The ends' slips come from their own wheel speeds against the ground speed
+        carried back or forward by the body's deceleration."""
+        weights = self._torque_weights
+        if weights is None:
+            return
+        times = self._wheel_times
+        n = len(times)
+        centre = n // 2
+        used = [k for k in range(n) if weights[k] > 0.0]
+        if not used or used[0] >= centre or used[-1] <= centre:
+            return
+        lo, hi = used[0], used[-1]
+        t_c = times[centre]
+        d_lo, d_hi = times[lo] - t_c, times[hi] - t_c
+        mean = sum(w * (times[k] - t_c) for k, w in enumerate(weights))
+        second = sum(w * (times[k] - t_c) ** 2 for k, w in enumerate(weights))
+        det = d_lo * d_hi * (d_hi - d_lo)
+        if not det < 0.0:
+            return
+        # Two weights at the ends that reproduce the filter's first two moments in time.
+        a_lo = min(max((mean * d_hi * d_hi - second * d_hi) / det, 0.0), 0.5)
+        a_hi = min(max((d_lo * second - d_lo * d_lo * mean) / det, 0.0), 0.5)
+        v = sample.speed_mps
+        accel = self._value("accel_long", t_c)
+        accel = accel - self._accel_bias_mps2 if accel is not None and math.isfinite(accel) else 0.0
+        if not v > 1.0:
+            return
+        ground_lo, ground_hi = 1.0 + accel * d_lo / v, 1.0 + accel * d_hi / v
+        rows = self._wheel_speeds
+        spread = []
+        for i in range(4):
+            slip = sample.slip[i]
+            w_c = rows[centre][i]
+            if not (w_c > 0.5 and 0.0 <= slip < 1.0):
+                spread.append((slip, slip))
+                continue
+            rolling = (1.0 - slip) / w_c
+            spread.append((max(0.0, 1.0 - rolling * rows[lo][i] / ground_lo),
+                           max(0.0, 1.0 - rolling * rows[hi][i] / ground_hi)))
+        sample.slip_spread = tuple(spread)
+        sample.slip_spread_weights = (a_lo, a_hi)
 
     def _input_lost(self, now_s: float) -> bool:
         """Whether a required message's next frame is overdue (lost, or rejected by the gate):

@@ -49,6 +49,12 @@ class PhysicalSample:
     # Share of input frames of about the last second rejected or repaired as implausible
     # (`plausibility.InputGate.suspect_share`): corruption that may have got through.
     input_suspect_share: float = 0.0
+    # μ is measured through the wheel-acceleration filter, a weighted mean over its window: it is
+    # the mean of the tyre's μ over the slips the wheel passed through then, not μ at `slip`.
+    # Per wheel the slips at the window's two ends, and the weights (`slip_spread_weights`, the
+    # centre taking the rest) that give the filter's mean and spread in time; None when unknown.
+    slip_spread: tuple[tuple[float, float], ...] | None = None
+    slip_spread_weights: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(slots=True)

@@ -628,3 +628,42 @@ def test_the_top_of_an_abs_cycle_is_measured_not_averaged_away(monkeypatch, whee
                 errors.append(sample.mu_used[i] - row[f"mu_{w}"])
     assert len(errors) > 40
     assert worst_bias < sum(errors) / len(errors) < 0.01
+
+
+@pytest.mark.parametrize("period, end_weight", [(0.02, 0.25), (0.01, 0.1625)])
+def test_each_sample_carries_the_slips_its_filter_averaged_over(period, end_weight):
+    """A wheel sweeping through slip (an ABS cycle's rise) is measured through a filter that
+    averages μ over ±20 ms: the sample carries the slips at the window's ends, and weights that
+    give the filter's spread in time (its torque weights: ¼ ½ ¼ over 3 samples at 20 ms; 0.1,
+    0.25, 0.3, 0.25, 0.1 over 5 at 10 ms, whose second moment 1.3 h² is that of 0.1625 at ±2 h)."""
+    periods = {m: period for m in MESSAGES}
+    fe = FrontEnd(VEH, FrontEndOptions(), MESSAGES, periods, "WHEELS")
+    v0, decel = 25.0, 4.0
+
+    def speed(t):
+        return v0 - decel * t
+
+    def fl_slip(t):
+        return 0.02 + 2.0 * t    # 2 per second: 0.04 across the filter's 20 ms either side
+
+    checked = 0
+    for k in range(int(0.12 / period)):
+        t = k * period
+        fe.push(t + 0.2 * period, "ACCEL", {"accel_long": -decel, "accel_lat": 0.0, "yaw_rate": 0.0})
+        fe.push(t + 0.4 * period, "PRESS", dict(zip(PRESSURE_NAMES, (40.0,) * 4)))
+        fe.push(t + 0.6 * period, "REF", {"vehicle_speed_ref": speed(t + 0.6 * period)})
+        tw = t + period
+        rolling = speed(tw) / VEH.wheel_radius
+        r = fe.push(tw, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, (rolling * (1 - fl_slip(tw)),) + (rolling * 0.97,) * 3)))
+        if r is None or r.sample is None:
+            continue
+        s = r.sample
+        assert s.slip_spread is not None
+        assert s.slip_spread_weights == pytest.approx((end_weight, end_weight), abs=1e-6)
+        lo, hi = s.slip_spread[0]
+        assert lo == pytest.approx(fl_slip(s.time_s - 0.02), abs=2e-3)
+        assert hi == pytest.approx(fl_slip(s.time_s + 0.02), abs=2e-3)
+        for wheel_lo, wheel_hi in s.slip_spread[1:]:   # held at 3 %: no spread
+            assert wheel_lo == pytest.approx(0.03, abs=2e-3) and wheel_hi == pytest.approx(0.03, abs=2e-3)
+        checked += 1
+    assert checked >= 2

@@ -1107,6 +1107,87 @@ out:
     return result;
 }
 
+/* μ alone at (λ, θ) (mu_partials_one's value; √ for the usual α = ½, the same to rounding). */
+static double mu_one(double lam, double v, double theta, const double *c)
+{
+    const double mu_c = c[0], dmu = c[1], alpha = c[2], k = c[4], v_s = c[5], sigma2 = c[6];
+    lam = fmin(lam, MAX_MODEL_SLIP);
+    const double lam_v = lam * v;
+    const double ratio = lam_v >= 0 ? (alpha == 0.5 ? sqrt(lam_v / v_s) : pow(lam_v * (1.0 / v_s), alpha)) : NAN;
+    const double g = mu_c + dmu * exp(-ratio);
+    const double Z = theta * k * lam / (g * (1.0 - lam));
+    const double F = Z < SMALL_Z ? Z / 2.0 - Z * Z / 6.0 : 1.0 + expm1(-Z) / Z;
+    return g / theta * F + sigma2 * lam_v;
+}
+
+/* estimator._spread_loss_numpy: over the window's samples [lo, hi) with a spread of slips (rows 2
+ * and 3 of `spread` not both 0; rows 0, 1 the slips at the filter window's ends), the share of
+ * the fitted μ at a sample's slip that the filter's mean over its spread loses, averaged over the
+ * samples at the top of their wheel's data (μ within 10 % of the wheel's highest, wheels with 3
+ * samples or more); 0 when there are none or the mean is not above 0. */
+static PyObject *py_spread_loss(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_slip, *o_speed, *o_mu, *o_wheel, *o_spread, *theta_obj;
+    Py_ssize_t lo, hi;
+    double mu_c, dmu, alpha, sigma0, k, v_s, sigma2, thetas[MAX_POINTS];
+    if (!PyArg_ParseTuple(args, "OOOOOnnO(ddddddd):spread_loss", &o_slip, &o_speed, &o_mu, &o_wheel, &o_spread, &lo,
+                          &hi, &theta_obj, &mu_c, &dmu, &alpha, &sigma0, &k, &v_s, &sigma2))
+        return NULL;
+    if (floats(theta_obj, thetas, "thetas") != NW) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "spread_loss: one theta per wheel");
+        return NULL;
+    }
+    Buf b[5];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    if (get_array(o_slip, &b[0], "slip", -1, 0, 0) < 0)
+        goto out;
+    const Py_ssize_t cap = b[0].view.len / 8;
+    if (get_array(o_speed, &b[1], "speed", cap, 0, 0) < 0 || get_array(o_mu, &b[2], "mu", cap, 0, 0) < 0
+        || get_array(o_wheel, &b[3], "wheel", cap, 0, 1) < 0 || get_array(o_spread, &b[4], "spread", 4 * cap, 0, 0) < 0)
+        goto out;
+    if (lo < 0 || hi < lo || hi > cap) {
+        PyErr_SetString(PyExc_ValueError, "spread_loss: lo, hi outside the window");
+        goto out;
+    }
+    const double *slip = b[0].view.buf, *speed = b[1].view.buf, *mu = b[2].view.buf, *spread = b[4].view.buf;
+    const Py_ssize_t *wheel = b[3].view.buf;
+    const double *s_lo = spread, *s_hi = spread + cap, *a_lo = spread + 2 * cap, *a_hi = spread + 3 * cap;
+    const double c[7] = {mu_c, dmu, alpha, sigma0, k, v_s, sigma2};
+    double top[NW];
+    Py_ssize_t count[NW] = {0, 0, 0, 0};
+    for (int w = 0; w < NW; w++)
+        top[w] = -INFINITY;
+    for (Py_ssize_t j = lo; j < hi; j++)
+        if (a_lo[j] + a_hi[j] > 0.0 && wheel[j] >= 0 && wheel[j] < NW) {
+            count[wheel[j]]++;
+            if (mu[j] > top[wheel[j]])
+                top[wheel[j]] = mu[j];
+        }
+    double sum = 0.0;
+    Py_ssize_t n = 0;
+    for (Py_ssize_t j = lo; j < hi; j++) {
+        if (!(a_lo[j] + a_hi[j] > 0.0) || wheel[j] < 0 || wheel[j] >= NW)
+            continue;
+        const Py_ssize_t w = wheel[j];
+        if (count[w] < 3 || !(mu[j] >= 0.9 * top[w]))
+            continue;
+        const double theta = thetas[w], v = speed[j];
+        const double centre = mu_one(slip[j], v, theta, c);
+        const double loss = a_lo[j] * (centre - mu_one(s_lo[j], v, theta, c))
+                            + a_hi[j] * (centre - mu_one(s_hi[j], v, theta, c));
+        sum += loss / (centre > 0.05 ? centre : 0.05);
+        n++;
+    }
+    const double share = n > 0 ? sum / (double)n : 0.0;
+    result = PyFloat_FromDouble(share > 0.0 ? share : 0.0);
+out:
+    release_all(b, 5);
+    return result;
+}
+
 /* ------------------------------------------------------------- the reported peak */
 
 
@@ -1763,6 +1844,10 @@ static PyMethodDef methods[] = {
     {"top_elasticity", py_top_elasticity, METH_VARARGS,
      "top_elasticity(slip, mu, wheel, times, start, end, since, wheel_i, min_n, min_upper) -> float | None\n\n"
      "estimator._top_elasticity: one wheel's local elasticity over the top half of its recent slips."},
+    {"spread_loss", py_spread_loss, METH_VARARGS,
+     "spread_loss(slip, speed, mu, wheel, spread, lo, hi, thetas, params) -> float\n\n"
+     "estimator._spread_loss_numpy: the mean share of the fitted mu the filter's spread of slips loses,\n"
+     "over the window's samples [lo, hi) at the top of their wheel's data."},
     {"search_left", py_search_left, METH_VARARGS,
      "search_left(times, lo, hi, t) -> int: times[lo:hi].searchsorted(t, side='left') + lo"},
     {NULL, NULL, 0, NULL},

@@ -196,7 +196,8 @@ class EstimateConfidence:
         # independent truths the error is 4–6 times that spread, 4 with wheel speeds at 50 Hz and
         # 6 at 100 Hz: √(`evidence_interval_s` / sample period).
         spread2 = (self._variance_inflation * rel_std * rel_std + drift**2 + o.model_mismatch**2
-                   + (o.misfit_peak_ratio * self._data_above_fit)**2)
+                   + (o.misfit_peak_ratio * self._data_above_fit)**2
+                   + (o.spread_loss_weight * self._peak_spread_loss)**2)
         ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
         # Newest residuals biased beyond the noise: the road may be changing under the fit.
         excess = max(0.0, self._innovation_score - o.jump_threshold)

@@ -159,6 +159,13 @@ class LugreTROptions:
     stop_floor_tolerance: float = 0.12    # VALID needs μ_max within this share of the stop's highest body utilisation
     axle_balance_time_constant: float = 2.0   # s; 0 disables the front/rear brake-gain balance
     axle_balance_limit: float = 0.3
+    # μ is measured as a mean over the slips a wheel swept within the derivative filter's window
+    # (`PhysicalSample.slip_spread`). Where the fitted curve bends within such a sweep the mean
+    # falls short of it, and the samples do not resolve the curve there to better than that: the
+    # share lost at the top of the wheels' data counts this many times in the confidence's σ,
+    # evaluated every `spread_loss_every` fits. 0 disables.
+    spread_loss_weight: float = 1.0
+    spread_loss_every: int = 4
 
     def validate(self) -> None:
         for f in fields(self):
@@ -256,6 +263,8 @@ class _Window:
         self.slip = np.empty(capacity)
         self.speed = np.empty(capacity)
         self.mu = np.empty(capacity)
+        # Per sample: the slips at the derivative window's ends and their weights (`slip_spread`).
+        self.spread = np.zeros((4, capacity))
         self.time = np.empty(capacity)
         self.wheel = np.empty(capacity, dtype=np.intp)
         self.lam_v = np.empty(capacity)
@@ -298,6 +307,7 @@ class _Window:
         s, e = self.start, self.end
         for arr in (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v, self.stiff):
             arr[:n] = arr[s:e]
+        self.spread[:, :n] = self.spread[:, s:e]
         self.rows[:, :n] = self.rows[:, s:e]
         self.core_rows[:n] = self.core_rows[s:e]
         self.cached_end = max(self.cached_end - s, 0)
@@ -314,6 +324,7 @@ class _Window:
                 self._compact()
         k = self.end
         self.slip[k], self.speed[k], self.mu[k], self.time[k], self.wheel[k] = slip, speed, mu, time_s, wheel
+        self.spread[:, k] = 0.0
         lam = min(slip, MAX_MODEL_SLIP)
         lam_v = lam * speed
         self.lam_v[k] = lam_v
@@ -332,9 +343,18 @@ class _Window:
             return
         core.append_samples(self.append_columns, self.end, slips, speed, mus, time_s, wheels, self.alpha,
                             self.patch_length, MAX_MODEL_SLIP)
+        self.spread[:, self.end:self.end + n] = 0.0
         for wheel in wheels:
             self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
         self.end += n
+
+    def set_spread(self, n: int, spreads: list[tuple[float, float]], weights: tuple[float, float]) -> None:
+        """The derivative-window slips (`slip_spread`) of the newest `n` samples, one pair each."""
+        first = self.end - n
+        block = self.spread[:, first:self.end]
+        block[:2] = list(zip(*spreads))
+        block[2] = weights[0]
+        block[3] = weights[1]
 
     def drop_before(self, time_s: float, core: Any = None) -> None:
         if core is not None:
@@ -346,6 +366,29 @@ class _Window:
     def view(self) -> tuple[np.ndarray, ...]:
         s = slice(self.start, self.end)
         return self.slip[s], self.speed[s], self.mu[s], self.time[s], self.wheel[s]
+
+
+def _spread_loss_numpy(w: _Window, lo: int, thetas: list[float], params: LugreParams) -> float:
+    """`LugreTrustRegionEstimator._spread_loss` over the window's samples from `lo` (`_fitcore.spread_loss`)."""
+    hi = w.end
+    rows = np.flatnonzero(w.spread[2, lo:hi] + w.spread[3, lo:hi] > 0.0) + lo
+    wheel, mu = w.wheel[rows], w.mu[rows]
+    top = np.zeros(len(rows), dtype=bool)
+    for i in range(N_WHEELS):
+        mine = wheel == i
+        if np.count_nonzero(mine) >= 3:
+            top |= mine & (mu >= 0.9 * mu[mine].max())
+    rows = rows[top]
+    n = len(rows)
+    if n == 0:
+        return 0.0
+    theta = np.asarray(thetas)[w.wheel[rows]]
+    lam = np.concatenate((w.slip[rows], w.spread[0, rows], w.spread[1, rows]))
+    model = braking_mu_and_partials(lam, np.tile(w.speed[rows], 3), np.tile(theta, 3), params, np.empty((3 * n, 4)))
+    centre = model[:n]
+    loss = w.spread[2, rows] * (centre - model[n:2 * n]) + w.spread[3, rows] * (centre - model[2 * n:])
+    share = float(np.mean(loss / np.maximum(centre, 0.05)))
+    return share if share > 0.0 else 0.0
 
 
 class _SmoothedMaximum:
@@ -468,6 +511,9 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._last_estimate: FrictionEstimate | None = None
         self._withdrawn_moving_s = -math.inf   # the last non-VALID update at a speed with evidence (`_hold`)
         self._fits = 0
+        self._fits_in_event = 0
+        self._spread_loss_fits = 0
+        self._peak_spread_loss = 0.0
         self._jumps = 0
         self._jump_times: deque[float] = deque()
         self._axle_balance = 0.0
@@ -514,6 +560,8 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._excitation_cache = None
         self._excitation_why: list = ["", "", "", ""]
         self._data_above_fit = 0.0
+        self._fits_in_event = self._spread_loss_fits = 0
+        self._peak_spread_loss = 0.0
         self._event_start_s = self._last_sample_s
         self._cov_unit = None
         self._slip_support = None
@@ -598,6 +646,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
             self._load_share = [f / total_load for f in loads]
         scales = None
         slips, mus, wheels = [], [], []
+        spread = sample.slip_spread
         min_slip, isfinite, usable = o.min_slip, math.isfinite, sample.usable
         wheel_slips, wheel_mus = sample.slip, sample.mu_used
         self._follow_runaways(t, wheel_slips)
@@ -620,8 +669,14 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         if slips:
             window.append_instant(slips, v, mus, t, wheels, self.core)
             added = len(slips)
+            if spread is not None:
+                window.set_spread(added, [spread[i] for i in wheels], sample.slip_spread_weights)
         if added and fresh:
             self._new_event()
+        if added and o.spread_loss_weight > 0 and self._fits_in_event > self._spread_loss_fits:
+            if self._fits_in_event % max(o.spread_loss_every, 1) == 0:
+                self._spread_loss_fits = self._fits_in_event
+                self._peak_spread_loss = self._spread_loss()
         last = self._last_estimate
         if added and len(window) >= o.min_samples:
             estimate = self._fit(t, v)
@@ -636,6 +691,26 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         if estimate.status != Status.VALID and v >= o.peak_evidence_min_speed:
             self._withdrawn_moving_s = t   # (`_hold`: what was withdrawn while moving stays withdrawn)
         return estimate
+
+    def _spread_loss(self) -> float:
+        """The share of the fitted curve that the front end's mean over each sample's slips
+        (`PhysicalSample.slip_spread`) loses, averaged over the samples that show the grip: the
+        top of each wheel's data (μ within 10 % of its highest) among those the fit leans on
+        (younger than `forgetting_time_constant`).
+
+        A wheel under ABS crosses its peak in one or two samples; μ read through the derivative
+        filter is the tyre's mean over that sweep, below the curve wherever it bends within it
+        (on a sharp Magic Formula peak at 50 Hz the samples read 10–25 % below it). The samples
+        that set the peak's height cannot show it to better than that. Measured on the fitted
+        curve, which is rounder than such a tyre, it is an underestimate there."""
+        w = self._window
+        _, thetas, params = self._floats_of_x()
+        since = self._last_sample_s - self.options.forgetting_time_constant
+        if self.core is not None:
+            lo = self.core.search_left(w.time, w.start, w.end, since)
+            return self.core.spread_loss(w.slip, w.speed, w.mu, w.wheel, w.spread, lo, w.end, thetas, params)
+        lo = w.start + int(w.time[w.start:w.end].searchsorted(since, side="left"))
+        return _spread_loss_numpy(w, lo, thetas, self._params(self._x))
 
     def _residuals(self, x: np.ndarray, slip, speed, mu_meas, sw, wheel, rows_index=None) -> tuple[np.ndarray, np.ndarray]:
         """Weighted data residuals, then the priors, then the soft ties between wheels' θ.
@@ -908,6 +983,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         normal, r_data = self._solve_numpy(sw)
         self._numpy_residuals = r_data / sw
         self._fits += 1
+        self._fits_in_event += 1
         self._last_fit_s = now_s
         self._innovation_score = self._innovation(now_s, times, r_data, weights)
         estimate = self._report(now_s, speed, float(r_data @ r_data), normal, weights, w_sum, len(slip))
@@ -937,6 +1013,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._x = x
         self._radius = max(radius, 1e-3)
         self._fits += 1
+        self._fits_in_event += 1
         self._last_fit_s = now_s
         m = hi - lo
         n_recent = m - first
@@ -1006,7 +1083,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(theta_list) / N_WHEELS
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(samples),
-                  "data_above_fit": self._data_above_fit,
+                  "data_above_fit": self._data_above_fit, "spread_loss": self._peak_spread_loss,
                   "sigma0": float(shared[3]), "v_s": float(shared[5]), "sigma2": float(shared[6]),
                   "jumps": float(self._jumps)}
         detail.update(zip(_WHEEL_STD_KEYS, map(float, wheel_std)))

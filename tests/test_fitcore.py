@@ -618,3 +618,32 @@ def test_top_elasticity_compiled_equals_numpy():
             defined += 1
             assert got == pytest.approx(want, rel=1e-9, abs=1e-12), (trial, got, want)
     assert defined > 300   # (the comparison ran on real values, not only on the Nones)
+
+
+def test_spread_loss_compiled_equals_numpy():
+    # Windows of random slips and μ with and without a spread (some wheels' ends far apart, over
+    # the peak; some none), at random parameters: the compiled mean over the top of each wheel's
+    # data is numpy's.
+    from frictiond.estimator import _spread_loss_numpy, _Window
+
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        p, thetas, v = random_peak_case(rng, v_min=3.0)
+        window = _Window(256)
+        n = int(rng.integers(0 if trial % 7 == 0 else 1, 200))
+        for k in range(n):
+            slip = float(rng.uniform(0.002, 0.7))
+            window.append(slip, v, float(rng.uniform(0.05, 1.0)), 0.01 * k, int(rng.integers(0, 4)))
+            if rng.random() < 0.8:
+                window.set_spread(1, [(max(0.0, slip - float(rng.uniform(0, 0.2))), slip + float(rng.uniform(0, 0.2)))],
+                                  (0.25, 0.25) if rng.random() < 0.5 else (0.1625, 0.1625))
+        lo = int(rng.integers(0, n + 1))
+        params = tm.compiled_params(p)
+        got = core.spread_loss(window.slip, window.speed, window.mu, window.wheel, window.spread, lo, window.end,
+                               thetas.tolist(), params)
+        want = _spread_loss_numpy(window, lo, thetas.tolist(), p)
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12), (trial, got, want)
+        assert got >= 0.0
+    with pytest.raises(ValueError):
+        core.spread_loss(window.slip, window.speed, window.mu, window.wheel, window.spread, 0, 10**6, thetas.tolist(),
+                         params)

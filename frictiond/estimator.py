@@ -350,11 +350,15 @@ class _Window:
 
     def set_spread(self, n: int, spreads: list[tuple[float, float]], weights: tuple[float, float]) -> None:
         """The derivative-window slips (`slip_spread`) of the newest `n` samples, one pair each."""
-        first = self.end - n
-        block = self.spread[:, first:self.end]
-        block[:2] = list(zip(*spreads))
-        block[2] = weights[0]
-        block[3] = weights[1]
+        spread = self.spread
+        a_lo, a_hi = weights
+        k = self.end - n
+        for lo, hi in spreads:   # (a few wheels: scalar stores cost less than building arrays)
+            spread[0, k] = lo
+            spread[1, k] = hi
+            spread[2, k] = a_lo
+            spread[3, k] = a_hi
+            k += 1
 
     def drop_before(self, time_s: float, core: Any = None) -> None:
         if core is not None:

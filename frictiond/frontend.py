@@ -332,6 +332,7 @@ class FrontEnd:
         self._speed_estimate_mps: float | None = None
         self._speed_time_s: float | None = None
         self._accel_bias_mps2 = 0.0
+        self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
         self._accel_bias_samples = 0
         self._brake_gain_factor = 1.0
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
@@ -559,42 +560,48 @@ class FrontEnd:
         same slips. The ends' slips come from their own wheel speeds against the ground speed
         carried back or forward by the body's deceleration."""
         weights = self._torque_weights
-        if weights is None:
+        v = sample.speed_mps
+        if weights is None or not v > 1.0:
             return
-        times = self._wheel_times
+        times = list(self._wheel_times)
         n = len(times)
         centre = n // 2
-        used = [k for k in range(n) if weights[k] > 0.0]
-        if not used or used[0] >= centre or used[-1] <= centre:
-            return
-        lo, hi = used[0], used[-1]
         t_c = times[centre]
+        lo, hi = -1, -1
+        mean = second = 0.0
+        for k in range(n):
+            w = weights[k]
+            if w > 0.0:
+                if lo < 0:
+                    lo = k
+                hi = k
+                d = times[k] - t_c
+                mean += w * d
+                second += w * d * d
+        if not 0 <= lo < centre < hi:
+            return
         d_lo, d_hi = times[lo] - t_c, times[hi] - t_c
-        mean = sum(w * (times[k] - t_c) for k, w in enumerate(weights))
-        second = sum(w * (times[k] - t_c) ** 2 for k, w in enumerate(weights))
         det = d_lo * d_hi * (d_hi - d_lo)
         if not det < 0.0:
             return
         # Two weights at the ends that reproduce the filter's first two moments in time.
         a_lo = min(max((mean * d_hi * d_hi - second * d_hi) / det, 0.0), 0.5)
         a_hi = min(max((d_lo * second - d_lo * d_lo * mean) / det, 0.0), 0.5)
-        v = sample.speed_mps
-        accel = self._value("accel_long", t_c)
+        accel = self._sample_accel
         accel = accel - self._accel_bias_mps2 if accel is not None and math.isfinite(accel) else 0.0
-        if not v > 1.0:
-            return
         ground_lo, ground_hi = 1.0 + accel * d_lo / v, 1.0 + accel * d_hi / v
         rows = self._wheel_speeds
+        at_lo, at_c, at_hi = rows[lo], rows[centre], rows[hi]
         spread = []
         for i in range(4):
             slip = sample.slip[i]
-            w_c = rows[centre][i]
+            w_c = at_c[i]
             if not (w_c > 0.5 and 0.0 <= slip < 1.0):
                 spread.append((slip, slip))
                 continue
             rolling = (1.0 - slip) / w_c
-            spread.append((max(0.0, 1.0 - rolling * rows[lo][i] / ground_lo),
-                           max(0.0, 1.0 - rolling * rows[hi][i] / ground_hi)))
+            spread.append((max(0.0, 1.0 - rolling * at_lo[i] / ground_lo),
+                           max(0.0, 1.0 - rolling * at_hi[i] / ground_hi)))
         sample.slip_spread = tuple(spread)
         sample.slip_spread_weights = (a_lo, a_hi)
 
@@ -861,6 +868,7 @@ class FrontEnd:
         t_c, omega, omega_dot, glitch = self._fit_wheels()
 
         inputs = self._values_at(t_c)
+        self._sample_accel = inputs[0]   # (`_attach_slip_spread`)
         if self.core is not None:
             # The rest in one compiled call on this object's state (the code below, line by line).
             ref, ref_fresh = None, False

@@ -1142,18 +1142,16 @@ static PyObject *py_spread_loss(PyObject *self, PyObject *args)
     Buf b[5];
     memset(b, 0, sizeof b);
     PyObject *result = NULL;
-    if (get_array(o_slip, &b[0], "slip", -1, 0, 0) < 0)
-        goto out;
-    const Py_ssize_t cap = b[0].view.len / 8;
-    if (get_array(o_speed, &b[1], "speed", cap, 0, 0) < 0 || get_array(o_mu, &b[2], "mu", cap, 0, 0) < 0
-        || get_array(o_wheel, &b[3], "wheel", cap, 0, 1) < 0 || get_array(o_spread, &b[4], "spread", 4 * cap, 0, 0) < 0)
+    const Py_ssize_t cap = get_slip_mu_wheel(o_slip, o_mu, o_wheel, b);
+    if (cap < 0 || get_array(o_speed, &b[3], "speed", cap, 0, 0) < 0
+        || get_array(o_spread, &b[4], "spread", 4 * cap, 0, 0) < 0)
         goto out;
     if (lo < 0 || hi < lo || hi > cap) {
         PyErr_SetString(PyExc_ValueError, "spread_loss: lo, hi outside the window");
         goto out;
     }
-    const double *slip = b[0].view.buf, *speed = b[1].view.buf, *mu = b[2].view.buf, *spread = b[4].view.buf;
-    const Py_ssize_t *wheel = b[3].view.buf;
+    const double *slip = b[0].view.buf, *mu = b[1].view.buf, *speed = b[3].view.buf, *spread = b[4].view.buf;
+    const Py_ssize_t *wheel = b[2].view.buf;
     const double *s_lo = spread, *s_hi = spread + cap, *a_lo = spread + 2 * cap, *a_hi = spread + 3 * cap;
     const double c[7] = {mu_c, dmu, alpha, sigma0, k, v_s, sigma2};
     double top[NW];

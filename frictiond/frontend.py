@@ -555,10 +555,10 @@ class FrontEnd:
         ω̇ were averaged over, with the weights that give that average's mean time and spread.
 
         Under ABS a wheel crosses its peak in one or two samples: μ read through the filter is
-        the mean over that sweep, below the peak wherever the curve bends (by 15–25 % at 50 Hz on
-        a sharp Magic Formula peak). The estimator compares it with the model's mean over the
-        same slips. The ends' slips come from their own wheel speeds against the ground speed
-        carried back or forward by the body's deceleration."""
+        the mean over that sweep, below the peak wherever the curve bends (10–25 % at 50 Hz on a
+        sharp Magic Formula peak). The estimator counts what that mean takes off its fitted
+        curve as uncertainty of the peak. The ends' slips come from their own wheel speeds
+        against the wheel's ground speed carried back or forward by the body's deceleration."""
         weights = self._torque_weights
         v = sample.speed_mps
         if weights is None or not v > 1.0:

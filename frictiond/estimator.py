@@ -515,8 +515,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._last_estimate: FrictionEstimate | None = None
         self._withdrawn_moving_s = -math.inf   # the last non-VALID update at a speed with evidence (`_hold`)
         self._fits = 0
-        self._fits_in_event = 0
-        self._spread_loss_fits = 0
+        self._event_first_fit = self._spread_loss_fit = 0   # `_fits` at the event's start, at the last spread loss
         self._peak_spread_loss = 0.0
         self._jumps = 0
         self._jump_times: deque[float] = deque()
@@ -564,7 +563,7 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._excitation_cache = None
         self._excitation_why: list = ["", "", "", ""]
         self._data_above_fit = 0.0
-        self._fits_in_event = self._spread_loss_fits = 0
+        self._event_first_fit = self._spread_loss_fit = self._fits
         self._peak_spread_loss = 0.0
         self._event_start_s = self._last_sample_s
         self._cov_unit = None
@@ -677,9 +676,9 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
                 window.set_spread(added, [spread[i] for i in wheels], sample.slip_spread_weights)
         if added and fresh:
             self._new_event()
-        if added and o.spread_loss_weight > 0 and self._fits_in_event > self._spread_loss_fits:
-            if self._fits_in_event % max(o.spread_loss_every, 1) == 0:
-                self._spread_loss_fits = self._fits_in_event
+        if added and o.spread_loss_weight > 0 and self._fits > self._spread_loss_fit:
+            if (self._fits - self._event_first_fit) % max(o.spread_loss_every, 1) == 0:
+                self._spread_loss_fit = self._fits
                 self._peak_spread_loss = self._spread_loss()
         last = self._last_estimate
         if added and len(window) >= o.min_samples:
@@ -987,7 +986,6 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         normal, r_data = self._solve_numpy(sw)
         self._numpy_residuals = r_data / sw
         self._fits += 1
-        self._fits_in_event += 1
         self._last_fit_s = now_s
         self._innovation_score = self._innovation(now_s, times, r_data, weights)
         estimate = self._report(now_s, speed, float(r_data @ r_data), normal, weights, w_sum, len(slip))
@@ -1017,7 +1015,6 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
         self._x = x
         self._radius = max(radius, 1e-3)
         self._fits += 1
-        self._fits_in_event += 1
         self._last_fit_s = now_s
         m = hi - lo
         n_recent = m - first

@@ -681,6 +681,11 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence):
                 self._spread_loss_fit = self._fits
                 self._peak_spread_loss = self._spread_loss()
         last = self._last_estimate
+        if added and t - self._last_fit_s > o.excitation_window_s:
+            # The first samples after a pause in the data (the brake released and applied again
+            # while older samples stay in the window): the excitation was read from samples that
+            # are no longer the newest. Not carried into this fit.
+            self._excitation_cache = None
         if added and len(window) >= o.min_samples:
             estimate = self._fit(t, v)
         elif len(window) >= o.min_samples and last is not None and last.status == Status.CONVERGING:

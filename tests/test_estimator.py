@@ -497,6 +497,34 @@ def test_a_withdrawn_valid_is_not_held_again_when_no_sample_is_usable():
             assert after.mu_max != before.mu_max
 
 
+@pytest.mark.parametrize("first_s", [1.50, 1.51, 1.52, 1.53])
+def test_a_brake_applied_again_after_a_pause_needs_new_evidence(first_s):
+    # ABS on dry for `first_s` (each length leaves the excitation, evaluated every few fits, at
+    # another phase), the brake released for 0.4 s (longer than `excitation_window_s`, shorter
+    # than the window: the dry samples stay in it), then applied again on a wet road, its slip
+    # ramping through the linear region. The excitation of the dry samples, no longer the
+    # newest, must not make the first fits VALID: they still give the dry road's 1.02.
+    dry, wet = tm.LugreParams(theta=1.0), tm.LugreParams(theta=2.2)
+    est = LugreTrustRegionEstimator()
+    run(est, braking(lambda t, i: lugre_curve(dry), seed=7, duration=first_s), lambda s: 0.0)
+    t = round(first_s, 2)
+    for _ in range(40):
+        est.update(PhysicalSample(t, 20.0, (0.0,) * 4, (0.0,) * 4, (0.0,) * 4, (0.0,) * 4, (False,) * 4, True))
+        t += 0.01
+    lam_star, truth = tm.peak(20.0, wet)[1], tm.peak(20.0, wet)[0]
+    rng = np.random.default_rng(8)
+    wrong = []
+    for k in range(30):
+        lam = (k + 1) / 30.0 * 0.6 * lam_star
+        mu = float(tm.mu(lam, 20.0, wet))
+        e = est.update(PhysicalSample(t, 20.0, (lam,) * 4, tuple(mu + float(rng.normal(0, 0.01)) for _ in range(4)),
+                                      (4000.0,) * 4, (0.0,) * 4, (True,) * 4, True))
+        if e.status == Status.VALID and abs(e.mu_max - truth) > 0.2 * truth:
+            wrong.append((round(t, 2), round(e.mu_max, 3)))
+        t += 0.01
+    assert not wrong, wrong[:5]
+
+
 def test_a_valid_withdrawn_mid_stop_is_not_brought_back_at_standstill():
     # Campaign development stop 427: one VALID at 1.70 s (15 % low), CONVERGING from the next
     # update on; at 3.70 s, the car at rest, the hold published that VALID again, 22 % below a

@@ -50,6 +50,14 @@ OPTIONAL_INPUTS = ("yaw_rate", "vehicle_speed_ref") + DRIVE_TORQUE_NAMES + (MAST
 MAX_WHEEL_SPEED_RADPS = 400.0
 MAX_ABS_ACCEL_MPS2 = 30.0
 FREE_ROLLING_SPREAD = 0.04     # relative wheel-speed spread a curve can explain without any slip
+# A braked wheel turns no faster than the car moves, but for: its tyre's rolling radius against
+# the configured one (this share of the speed), the wheel speeds' noise and the speed estimate's
+# error (this much), and a curve's outer track (half the track times the yaw rate, |a_y|/v).
+WHEEL_RADIUS_SPREAD = 0.01
+WHEEL_SPEED_NOISE_MPS = 0.15
+# Braking harder than this, a wheel speed sender is told from another by the car's speed
+# (`FrontEnd._wheel_senders_told_apart`): wheels drive no car that decelerates.
+MIN_TELLING_DECEL_MPS2 = 1.0
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
@@ -244,6 +252,7 @@ class FrontEnd:
         for message, names in message_signals.items():
             for name in names:
                 self._signal_message[name] = message
+        self._message_signals = {message: tuple(names) for message, names in message_signals.items()}
         self.required_messages = frozenset(
             self._signal_message[n] for n in REQUIRED_INPUTS if n in self._signal_message
         )
@@ -536,7 +545,8 @@ class FrontEnd:
         # (what this sample will teach, as it was: put back if its frame is revoked, `_take_back`)
         self._before_sample = (time_s, self._speed_estimate_mps, self._speed_time_s, self._last_sample_time_s,
                                [getattr(self, name) for name in _LEARNT_STATE])
-        if self._newest_suspect() or self.gate.contested(time_s) or self._input_lost(time_s):
+        if (self._newest_suspect() or self._input_lost(time_s)
+                or (self.gate.contested(time_s) and not self._wheel_senders_told_apart(time_s))):
             result = self._suspect_sample(stale)
         else:
             result = self._compute_sample(stale)
@@ -711,6 +721,40 @@ class FrontEnd:
         coasted = min(max(v + (accel - self._accel_bias_mps2) * (time_s - t), 0.0), MAX_SPEED_MPS)
         # (only ever down to it: a reference sensor or a slower wheel may have said less)
         self._speed_estimate_mps = min(self._speed_estimate_mps, coasted)
+
+    def _wheel_senders_told_apart(self, time_s: float) -> bool:
+        """While only wheel speeds have a second sender in doubt: whether the car's speed tells
+        which one is genuine. Braking, no wheel turns faster than the car moves (its slip is
+        ≥ 0), so a sender whose fastest wheel is faster than the speed estimate (carried on the
+        accelerometer alone while the senders are in doubt) by more than the wheels' radii,
+        noise and a curve's outer track allow is not the car's: a replay of an earlier, faster
+        moment of the stop, or of the cruise before it, flat through the brake onset. The frames
+        taken are then the other sender's, and when each one in the derivative window fits the
+        car's speed as well, the sample is fitted."""
+        v = self._speed_estimate_mps
+        at = self._speed_time_s
+        accel = self._value("accel_long", time_s)
+        if v is None or at is None or accel is None or not accel - self._accel_bias_mps2 <= -MIN_TELLING_DECEL_MPS2:
+            return False
+        veh = self.vehicle
+        lateral = self._value("accel_lat", time_s)
+        if lateral is None or not math.isfinite(lateral):
+            return False
+        outer = 0.5 * max(veh.track_front, veh.track_rear) * abs(lateral) / max(v, 1.0)
+        radius = veh.wheel_radius
+        for message, rival in self.gate.contested_senders(time_s).items():
+            names = self._message_signals.get(message, ())
+            if rival is None or not names or not set(names) <= set(WHEEL_SPEED_NAMES):
+                return False
+            fastest = max(rival.get(name, 0.0) for name in names) * radius
+            if not fastest > v * (1.0 + WHEEL_RADIUS_SPREAD) + WHEEL_SPEED_NOISE_MPS + outer:
+                return False
+        decel = self._accel_bias_mps2 - accel
+        for t, speeds in zip(self._wheel_times, self._wheel_speeds):
+            car = v + decel * max(at - t, 0.0)    # (faster before the estimate's time)
+            if max(speeds) * radius > car * (1.0 + WHEEL_RADIUS_SPREAD) + WHEEL_SPEED_NOISE_MPS + outer:
+                return False
+        return True
 
     def _accel_of_two_senders(self, taken: float, sample: PhysicalSample) -> float | None:
         """While a second node sends the accelerometer's message (None when none does): of the

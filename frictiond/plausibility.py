@@ -17,7 +17,9 @@ fit), `InputGate.admit` checks them against
   other's frames are rejected, and a frame taken before the other showed it up is revoked
   (`revoked`: the front end takes it out of its histories). Two senders whose first frames
   matched (a replay of a flat stretch) were never told apart: once their values part, every
-  frame is a judgement (`contested`) for as long as both send.
+  frame is a judgement (`contested`) for as long as both send; `contested_senders` names the
+  messages in doubt and the other sender's values (the front end can tell wheel-speed senders
+  apart by the car's speed, which the gate does not know).
 
 A frame that breaks any of them is rejected whole (a random payload rarely breaks only one
 signal) and counted by kind. After it is accepted, `repair_spike` looks back one frame: a value
@@ -173,7 +175,7 @@ class _Track:
 
     __slots__ = ("period_s", "time_s", "values", "arrival_s", "arrival_gap_s", "interval_s", "rejects", "last_reject",
                  "recent", "arrivals", "rejected", "agreeing", "accepted", "rival", "rival_s", "cadence_s",
-                 "identified")
+                 "identified", "rival_last", "doubted_s")
 
     def __init__(self, period_s: float) -> None:
         self.period_s = period_s
@@ -199,6 +201,16 @@ class _Track:
         # came: a replay of a flat stretch matches the genuine frames, so which track is followed
         # is then chance, and when the two part later each continues its own track.
         self.identified = True
+        # The second source's newest frame (kept when it falls silent), and when a frame of this
+        # message last left which sender sent it in doubt (`InputGate._unsure`), bus time.
+        self.rival_last: tuple[float, dict[str, float]] | None = None
+        self.doubted_s = -math.inf
+
+    def to_rival(self, frame: tuple[float, dict[str, float]], now_s: float) -> None:
+        """A frame judged the second source's."""
+        self.rival.append(frame)
+        self.rival_last = frame
+        self.rival_s = now_s
 
 
 class InputGate:
@@ -469,8 +481,9 @@ class InputGate:
                 return "clock step"
             self._bus_time_s = time_s
             for t in self._tracks.values():     # a new time base: the old histories mean nothing
-                t.time_s = t.arrival_s = t.rival_s = -math.inf
+                t.time_s = t.arrival_s = t.rival_s = t.doubted_s = -math.inf
                 t.arrival_gap_s = math.inf
+                t.rival_last = None
                 t.values = {}
                 t.accepted.clear()
                 t.rival.clear()
@@ -534,11 +547,10 @@ class InputGate:
             genuine = self._misfit(track, accepted, time_s, values)
             kind = None if genuine <= rival else "second source"
             if not _clear(genuine, rival):
-                self._unsure()
+                self._unsure(track)
         self._doubt_unidentified(track, values, kind)
         if kind is not None:
-            track.rival.append((time_s, dict(values)))
-            track.rival_s = now
+            track.to_rival((time_s, dict(values)), now)
         return kind
 
     def _doubt_unidentified(self, track: _Track, values: Mapping[str, float], kind: str | None) -> None:
@@ -550,7 +562,7 @@ class InputGate:
             return
         other = track.values if kind is not None else track.rival[-1][1] if track.rival else None
         if other is None or self._distance(values, other) > SOURCES_DIFFER:
-            self._unsure()
+            self._unsure(track)
 
     def _newer_is_genuine(self, message: str, track: _Track, keep: float, swap: float) -> bool:
         """The accepted frame and a newer one, one of them a second node's: `keep` the misfit of
@@ -558,7 +570,7 @@ class InputGate:
         better (and fits at all), the accepted frame is revoked and the newer one is genuine;
         when the misfits cannot tell, the frame is a judgement (`_unsure`)."""
         if not _clear(keep, swap):
-            self._unsure()
+            self._unsure(track)
         if keep - swap > SOURCES_DIFFER and swap <= FITS:
             self._revoke(message, track, self._bus_time_s)
             return True
@@ -567,8 +579,7 @@ class InputGate:
     def _revoke(self, message: str, track: _Track, now: float) -> None:
         """The last accepted frame was the second node's: out of the track (back to the one
         before), to the rival's, counted; the caller takes it out of its histories (`revoked`)."""
-        track.rival.append(self._drop_last_accepted(message, track, "second source"))
-        track.rival_s = now
+        track.to_rival(self._drop_last_accepted(message, track, "second source"), now)
 
     def _drop_last_accepted(self, message: str, track: _Track, kind: str) -> tuple[float, dict[str, float]]:
         """The last accepted frame out of the track (back to the one before), counted as `kind`
@@ -581,10 +592,11 @@ class InputGate:
         self._share_bad += 1.0
         return last
 
-    def _unsure(self) -> None:
-        """Which of two sources sent a frame is not certain: the next samples are not fitted,
-        and the frame counts as suspect."""
+    def _unsure(self, track: _Track) -> None:
+        """Which of two sources sent a frame of `track`'s message is not certain: the next
+        samples are not fitted, and the frame counts as suspect."""
         self._contested_s = max(self._contested_s, self._bus_time_s)
+        track.doubted_s = self._bus_time_s
         self._doubt = True
 
     def _first_rival_frame(self, time_s: float, message: str, track: _Track, values: Mapping[str, float]) -> str | None:
@@ -595,7 +607,7 @@ class InputGate:
         accepted = track.accepted
         if len(accepted) < 2 or accepted[-1][0] != track.time_s:
             track.identified = False
-            track.rival.append((time_s, dict(values)))
+            track.to_rival((time_s, dict(values)), self._bus_time_s)
             return "second source"
         before = list(accepted)[:-1]
         last_time, last_values = accepted[-1]
@@ -604,7 +616,7 @@ class InputGate:
         track.identified = _told_apart(last, new)
         if self._newer_is_genuine(message, track, last, new):
             return None
-        track.rival.append((time_s, dict(values)))
+        track.to_rival((time_s, dict(values)), self._bus_time_s)
         return "second source"
 
     def _misfit(self, track: _Track, frames, time_s: float, values: Mapping[str, float]) -> float:
@@ -685,6 +697,12 @@ class InputGate:
                 if value is not None and math.isfinite(value):
                     return value
         return None
+
+    def contested_senders(self, time_s: float) -> dict[str, dict[str, float] | None]:
+        """The messages whose sender was in doubt within `CONTEST_S` before `time_s` (what makes
+        `contested` true), each with the other sender's newest values (None if not known)."""
+        return {message: None if track.rival_last is None else track.rival_last[1]
+                for message, track in self._tracks.items() if 0.0 <= time_s - track.doubted_s <= CONTEST_S}
 
     def persistent(self, message: str) -> str | None:
         """The kind of rejection when a message's frames keep being rejected (5 in a row, or 8

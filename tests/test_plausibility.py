@@ -441,6 +441,64 @@ def test_a_replayed_accelerometer_never_told_apart_leaves_no_speed_error_at_brak
     assert error < clean_error + 0.05
 
 
+def _onset_with_replayed_wheel_speeds(phase_s: float | None) -> dict[float, tuple]:
+    """A car rolling at 25 m/s brakes from 0.5 s (deceleration and wheel slip rising to 6 m/s²
+    and 8 % within 0.1 s); from 0.3 to 0.9 s a second node sends WHEELS `phase_s` after each
+    genuine frame with the values of 0.5 s before (flat until 1.0 s). Returns, per wheel-speed
+    frame time from 0.5 s, the fitted sample's (slip, μ) of the front left wheel, None where
+    the sample is not fitted."""
+    onset, v0 = 0.5, 25.0
+
+    def ramp(t):
+        return min(max((t - onset) / 0.1, 0.0), 1.0)
+
+    def speed(t):
+        r = min(max(t - onset, 0.0), 0.1)
+        return v0 - 6.0 * (r * r / 0.2 + max(t - onset - 0.1, 0.0))
+
+    def wheels(t):
+        return dict.fromkeys(WHEEL_SPEED_NAMES, speed(t) * (1.0 - 0.08 * ramp(t)) / VEH.wheel_radius)
+
+    fe = make(messages={m: s for m, s in MESSAGES.items() if m != "REF"})   # (no ground-speed sensor)
+    events = []
+    for k in range(150):
+        t = 0.01 * k
+        events += [(t, "WHEELS", wheels(t)),
+                   (t + 0.003, "ACCEL", {"accel_long": -6.0 * ramp(t + 0.003), "accel_lat": 0.0, "yaw_rate": 0.0}),
+                   (t + 0.006, "PRESS", dict.fromkeys(PRESSURE_NAMES, 60.0 * ramp(t + 0.006)))]
+        if phase_s is not None and 0.3 <= t < 0.9:
+            events.append((t + phase_s, "WHEELS", wheels(t + phase_s - 0.5)))
+    fitted = {}
+    for t, message, values in sorted(events, key=lambda e: e[0]):
+        result = fe.push(t, message, values)
+        if message == "WHEELS" and t >= onset and result is not None and result.sample is not None:
+            s = result.sample
+            fitted[round(s.time_s, 4)] = (s.slip[0], s.mu_used[0]) if s.usable[0] else None
+    return fitted
+
+
+@pytest.mark.parametrize("phase_s", [-0.0002, 0.0002, 0.004])
+def test_a_replayed_wheel_speed_sender_faster_than_the_car_is_told_apart_by_its_speed(phase_s):
+    # The replay's first frames match the genuine ones (the car rolled steadily): which sender
+    # the gate follows is chance, and from the onset each continues its own track. A braked
+    # wheel turns no faster than the car moves: once the replay's wheels are faster than the
+    # speed estimate (carried on the accelerometer) by more than noise and radii allow, it is
+    # not the car's; the samples of the frames taken are fitted when each of those fits the
+    # car's speed, and are then the clean run's own. Where the replay is the one followed, its
+    # frames do not fit the car's speed: nothing is fitted from them.
+    clean = _onset_with_replayed_wheel_speeds(None)
+    spoofed = _onset_with_replayed_wheel_speeds(phase_s)
+    in_burst = [t for t in clean if 0.7 <= t < 0.9]
+    assert all(clean[t] is not None for t in in_burst)
+    for t in in_burst:
+        if spoofed.get(t) is not None:
+            # (the same frames; the speed estimate coasted on the accelerometer while in doubt)
+            assert spoofed[t] == pytest.approx(clean[t], rel=0.02, abs=1e-3)
+    fitted = sum(spoofed.get(t) is not None for t in in_burst)
+    replay_followed = phase_s == -0.0002    # (its frame first in each cycle, by less than the jitter)
+    assert fitted >= (0 if replay_followed else 0.8 * len(in_burst))
+
+
 def test_when_the_followed_sender_falls_silent_the_one_still_sending_is_followed():
     # Two nodes send PRESS, half a cycle apart, at different levels; at 0.5 s the followed one
     # stops. The other is the only sender of the message now: followed after three cycles.

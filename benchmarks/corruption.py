@@ -3,7 +3,9 @@
 Each stop is replayed clean, then with 1, 3, 5 and 10 % of its input frames corrupted in each way of
 `frictiond.corruption.KINDS` (random payloads, a bit flip in one signal, short DLC, 0xFF/0x00
 markers, duplicates, reordering, single frames stepped 1 s back or ahead, a second node replaying
-one message at the same rate). Outputs are judged as a receiver decodes them off the bus
+one message at the same rate; and "mixed", the mix of issue 22's report scaled to the rate: at 7 %,
+3 % random payloads, 2 % short DLC, 1 % all-0xFF wheel-speed frames, 1 % duplicates, with ten
+frames stepped back 1 s). Outputs are judged as a receiver decodes them off the bus
 (`faults.replay_on_bus`). Per kind and rate:
 
 - false VALID: VALID outputs more than 20 % off the truth, share of all VALID outputs;

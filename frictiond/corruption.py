@@ -15,7 +15,8 @@ from .codec import InputCodec
 from .frames import Frame
 
 KINDS = ("random payload", "bit flip", "short DLC", "0xFF/0x00 marker", "duplicate", "reorder",
-         "clock step back", "clock step ahead", "spoofing node")
+         "clock step back", "clock step ahead", "spoofing node", "mixed")
+STEPPED_BACK_FRAMES = 10    # "mixed": input frames stepped back 1 s besides its share
 
 
 def _picked(frames: list[Frame], ids: frozenset[int], rate: float, rng: random.Random) -> list[bool]:
@@ -78,7 +79,30 @@ def corrupt(kind: str, frames: list[Frame], codec: InputCodec, rate: float, seed
         return _reorder(frames, ids, rate, seed)
     if kind == "spoofing node":
         return _spoof(frames, codec, rate, seed)
+    if kind == "mixed":
+        return _mixed(frames, codec, rate, seed)
     raise ValueError(f"unknown corruption kind {kind!r}")
+
+
+def _mixed(frames: list[Frame], codec: InputCodec, rate: float, seed: int) -> tuple[list[Frame], int]:
+    """The mix a user met on a clean ABS stop (issue 22's report), scaled so that its four parts
+    sum to `rate`: 3/7 of it random payloads and 2/7 short DLC on the input frames, 1/7 all-0xFF
+    frames of the wheel-speed message (a share of its own frames), 1/7 duplicates; and
+    `STEPPED_BACK_FRAMES` input frames stepped back 1 s. At 7 % it is that report's mix."""
+    frames, n = corrupt("random payload", frames, codec, rate * 3 / 7, seed)
+    more, k = corrupt("short DLC", frames, codec, rate * 2 / 7, seed + 1)
+    frames, n = more, n + k
+    more, k = _each(frames, frozenset({codec.trigger_id}), rate / 7, seed + 2,
+                    lambda f, rng: [f._replace(data=b"\xff" * len(f.data))])
+    frames, n = more, n + k
+    more, k = corrupt("duplicate", frames, codec, rate / 7, seed + 3)
+    frames, n = more, n + k
+    ids = frozenset(codec.input_ids)
+    rng = random.Random(seed + 4)
+    inputs = [i for i, f in enumerate(frames) if f.can_id in ids]
+    for i in rng.sample(inputs, min(STEPPED_BACK_FRAMES, len(inputs))):
+        frames[i] = frames[i]._replace(time_s=frames[i].time_s - 1.0)
+    return frames, n + min(STEPPED_BACK_FRAMES, len(inputs))
 
 
 def _reorder(frames: list[Frame], ids: frozenset[int], rate: float, seed: int) -> tuple[list[Frame], int]:

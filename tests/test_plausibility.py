@@ -230,6 +230,30 @@ def test_corruption_at_5_percent_gives_no_false_valid(default_config, scenario, 
         assert sum(pipeline.front_end.gate.counts.values()) > 0.5 * n
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_mix_of_the_users_report_bends_no_valid(default_config, seed):
+    # Issue 22's report: a clean wet-cobblestone ABS stop with 3 % random payloads on the input
+    # IDs, 2 % short DLC, 1 % all-0xFF wheel-speed frames, 1 % duplicates and ten frames stepped
+    # back 1 s; 109 of its 180 VALID outputs were 20-25 % low.
+    frames, truth = stop(default_config, "cobblestone_wet")
+    _, clean, _ = replay_on_bus(default_config, frames)
+    codec = input_codec_for(default_config)
+    damaged, n = corruption.corrupt("mixed", frames, codec, 0.07, seed=seed)
+    inputs = sum(f.can_id in codec.input_ids for f in frames)
+    wheels = sum(f.can_id == codec.trigger_id for f in frames)
+    expected = round(0.03 * inputs) + round(0.02 * inputs) + round(0.01 * wheels) + round(0.01 * inputs)
+    assert n == expected + corruption.STEPPED_BACK_FRAMES
+    pipeline, estimates, bad = replay_on_bus(default_config, damaged)
+    assert not bad
+    errors, clean_errors = valid_errors(estimates, truth), valid_errors(clean, truth)
+    assert not any(e > 0.2 for e in errors)
+    assert len(errors) >= 0.7 * len(clean_errors)
+    mae = np.mean([e * truth(x.time_s) for e, x in zip(errors, [x for x in estimates if x.status == Status.VALID])])
+    clean_mae = np.mean([e * truth(x.time_s) for e, x in zip(clean_errors, [x for x in clean if x.status == Status.VALID])])
+    assert mae <= clean_mae + 0.02
+    assert pipeline.front_end.gate.counts["clock step"] >= corruption.STEPPED_BACK_FRAMES
+
+
 def test_the_replay_summary_names_rejections_and_why_not_valid(default_config):
     frames, truth = stop(default_config, "wet")
     damaged, _ = corruption.corrupt("random payload", frames, input_codec_for(default_config), 0.12, seed=3)

@@ -19,6 +19,7 @@ Pure numerics: it knows canonical signal names, not CAN.
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from dataclasses import dataclass
 from operator import mul
@@ -58,6 +59,7 @@ WHEEL_SPEED_NOISE_MPS = 0.15
 # Braking harder than this, a wheel speed sender is told from another by the car's speed
 # (`FrontEnd._wheel_senders_told_apart`): wheels drive no car that decelerates.
 MIN_TELLING_DECEL_MPS2 = 1.0
+PRESSURE_ZERO_READINGS = 128   # free-rolling readings a pressure sensor's zero point is the median of
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
@@ -253,6 +255,7 @@ class FrontEnd:
             for name in names:
                 self._signal_message[name] = message
         self._message_signals = {message: tuple(names) for message, names in message_signals.items()}
+        self._pressure_messages = frozenset(self._signal_message[n] for n in PRESSURE_NAMES if n in self._signal_message)
         self.required_messages = frozenset(
             self._signal_message[n] for n in REQUIRED_INPUTS if n in self._signal_message
         )
@@ -343,6 +346,13 @@ class FrontEnd:
         self._accel_bias_mps2 = 0.0
         self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
         self._accel_bias_samples = 0
+        # Each pressure sensor's reading with the brakes released (its zero point, learnt while
+        # free rolling: `_learn_pressure_zeros`), taken off its readings; the newest raw readings.
+        self._pressure_zero = dict.fromkeys(PRESSURE_NAMES, 0.0)
+        self._pressure_zero_readings = {name: deque(maxlen=PRESSURE_ZERO_READINGS) for name in PRESSURE_NAMES}
+        self._pressure_zero_samples = 0
+        self._pressure_zeroed = False
+        self._raw_pressures: dict[str, float] = {}
         self._brake_gain_factor = 1.0
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
         # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...
@@ -451,6 +461,8 @@ class FrontEnd:
             if is_trigger:
                 self._wheel_times.clear()
                 self._wheel_speeds.clear()
+        if message in self._pressure_messages:
+            values = self._zeroed_pressures(values)
         core = self.core
         if core is not None and type(time_s) is float and type(values) is dict and time_s >= history.last_arrival_s:
             # `_MessageHistory.push`'s compiled path, without its call (once per input frame)
@@ -549,9 +561,12 @@ class FrontEnd:
                 or (self.gate.contested(time_s) and not self._wheel_senders_told_apart(time_s))):
             result = self._suspect_sample(stale)
         else:
+            free_rolling_before = self._accel_bias_samples
             result = self._compute_sample(stale)
             if result.sample is not None and result.sample.braking:
                 self._attach_slip_spread(result.sample)
+            elif result.sample is not None and self._accel_bias_samples > free_rolling_before:
+                self._learn_pressure_zeros()
         if result.fault == "wheel speed glitch":
             self.gate.count_repair(result.fault)
         if result.sample is not None:
@@ -721,6 +736,45 @@ class FrontEnd:
         coasted = min(max(v + (accel - self._accel_bias_mps2) * (time_s - t), 0.0), MAX_SPEED_MPS)
         # (only ever down to it: a reference sensor or a slower wheel may have said less)
         self._speed_estimate_mps = min(self._speed_estimate_mps, coasted)
+
+    def _zeroed_pressures(self, values: Mapping[str, float]) -> Mapping[str, float]:
+        """A pressure message's values less each sensor's zero point (`_learn_pressure_zeros`),
+        not below 0; the raw readings are kept for the learning."""
+        raw = self._raw_pressures
+        zero = self._pressure_zero
+        for name, value in values.items():
+            if name in zero:
+                raw[name] = value
+        if not self._pressure_zeroed:
+            return values
+        return {name: max(0.0, value - zero[name]) if name in zero and value == value else value
+                for name, value in values.items()}
+
+    def _learn_pressure_zeros(self) -> None:
+        """Free rolling (the samples the accelerometer's offset is learnt from: no brake, the
+        wheels' acceleration the body's): the brakes are released and each pressure sensor
+        reads its own zero point. A sensor that reads 0.9 bar there reads 0.9 bar too much
+        under the brakes, 10-30 % of an ABS's pressures on ice. The zero point is the median
+        of the last `PRESSURE_ZERO_READINGS` readings, not their mean: a sensor reads no
+        pressure below 0, so its noise around a true zero is cut to 0 on one side, and a mean
+        would take half a noise's width off every pressure. (A negative zero point is not seen
+        either: nothing is taken off those sensors.)"""
+        raw = self._raw_pressures
+        if not raw:
+            return
+        self._pressure_zero_samples += 1
+        readings = self._pressure_zero_readings
+        for name, value in raw.items():
+            if name in readings and math.isfinite(value):
+                readings[name].append(value)
+        n = self._pressure_zero_samples
+        if n > PRESSURE_ZERO_READINGS and n % 8:
+            return    # (a window of readings moves slowly: its median every 8th sample)
+        zero = self._pressure_zero
+        for name, values in readings.items():
+            if values:
+                zero[name] = max(0.0, float(statistics.median_low(values)))
+        self._pressure_zeroed = any(z > 0.0 for z in zero.values())
 
     def _wheel_senders_told_apart(self, time_s: float) -> bool:
         """While only wheel speeds have a second sender in doubt: whether the car's speed tells

@@ -667,3 +667,38 @@ def test_each_sample_carries_the_slips_its_filter_averaged_over(period, end_weig
             assert wheel_lo == pytest.approx(0.03, abs=2e-3) and wheel_hi == pytest.approx(0.03, abs=2e-3)
         checked += 1
     assert checked >= 2
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("offset", [0.0, 0.8])
+def test_a_pressure_sensor_reads_its_zero_point_off_when_the_brakes_are_released(compiled, offset):
+    # A pressure sensor reading `offset` bar too much (its noise, 0.5 bar, cut to 0 below zero as
+    # a sensor reads no negative pressure). Free rolling for a second, then gentle braking, as on
+    # ice: 1 m/s² from about 8 bar, where 0.8 bar is 10 % of the brake torque. The brake torques
+    # are those of the true pressures: the zero point is learnt while the brakes are released,
+    # and as the median of the readings (their mean would take half the noise off every
+    # pressure with no offset at all).
+    rng = random.Random(4)
+    v0, onset = 20.0, 1.0
+    drive = Drive(v0=v0, decel=1.0, slip=0.02)
+    drive.pressure = _needed_pressure(1.0, 0.02, v0 - 0.5)
+    fe = make(FrontEndOptions(brake_gain_correction=False))
+    if not compiled:
+        fe.core = None
+    forces, expected = [], []
+    for k in range(200):
+        t = 0.01 * k
+        braking = t >= onset
+        tb = t - onset
+        w = drive.omega(tb) if braking else v0 / VEH.wheel_radius
+        fe.push(t + 0.003, "ACCEL", {"accel_long": -drive.decel if braking else 0.0, "accel_lat": 0.0, "yaw_rate": 0.0})
+        true_p = drive.pressure if braking else 0.0
+        fe.push(t + 0.006, "PRESS", {n: max(0.0, true_p + offset + rng.gauss(0.0, 0.5)) for n in PRESSURE_NAMES})
+        fe.push(t + 0.008, "REF", {"vehicle_speed_ref": drive.speed(tb) if braking else v0})
+        r = fe.push(t + 0.01, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w))
+        if r is not None and r.sample is not None and r.sample.time_s > onset + 0.1 and all(r.sample.usable):
+            forces.append(sum(r.sample.tyre_force_n))
+            torques = sum(VEH.brake_torque_nm(i, drive.pressure) for i in range(4))
+            expected.append((4 * VEH.wheel_inertia * drive.omega_dot() + torques) / VEH.wheel_radius)
+    assert len(forces) > 50
+    assert sum(forces) / len(forces) == pytest.approx(sum(expected) / len(expected), rel=0.02)

@@ -419,19 +419,26 @@ def test_a_revoked_wheel_speed_frame_leaves_no_trace_in_the_front_end():
     assert spoofed._history["WHEELS"].series["wheel_speed_fl"][1][-1] == plain._history["WHEELS"].series["wheel_speed_fl"][1][-1]
 
 
+_ONSET_S, _ONSET_V0 = 0.5, 25.0
+
+
+def _onset_ramp(t: float) -> float:
+    """0 before a brake onset at `_ONSET_S`, rising to 1 within 0.1 s."""
+    return min(max((t - _ONSET_S) / 0.1, 0.0), 1.0)
+
+
+def _onset_speed(t: float) -> float:
+    """The car's speed through that onset: `_ONSET_V0`, then 6 m/s² reached within 0.1 s."""
+    r = min(max(t - _ONSET_S, 0.0), 0.1)
+    return _ONSET_V0 - 6.0 * (r * r / 0.2 + max(t - _ONSET_S - 0.1, 0.0))
+
+
 def _onset_with_a_replayed_accelerometer(phase_s: float | None) -> tuple[float, int]:
     """A car rolling at 25 m/s brakes from 0.5 s (deceleration and wheel slip rising to 6 m/s²
     and 8 % within 0.1 s); from 0.3 to 0.7 s a second node sends ACCEL `phase_s` after each
     genuine frame with the values of 0.5 s before (flat: the car was rolling). Returns the
     speed estimate's error at 1.5 s and the wheel frames whose samples were contested."""
-    onset, v0 = 0.5, 25.0
-
-    def ramp(t):
-        return min(max((t - onset) / 0.1, 0.0), 1.0)
-
-    def speed(t):
-        r = min(max(t - onset, 0.0), 0.1)
-        return v0 - 6.0 * (r * r / 0.2 + max(t - onset - 0.1, 0.0))
+    ramp, speed = _onset_ramp, _onset_speed
 
     def accel(t):
         return {"accel_long": -6.0 * ramp(t), "accel_lat": 0.0, "yaw_rate": 0.0}
@@ -471,14 +478,7 @@ def _onset_with_replayed_wheel_speeds(phase_s: float | None) -> dict[float, tupl
     genuine frame with the values of 0.5 s before (flat until 1.0 s). Returns, per wheel-speed
     frame time from 0.5 s, the fitted sample's (slip, μ) of the front left wheel, None where
     the sample is not fitted."""
-    onset, v0 = 0.5, 25.0
-
-    def ramp(t):
-        return min(max((t - onset) / 0.1, 0.0), 1.0)
-
-    def speed(t):
-        r = min(max(t - onset, 0.0), 0.1)
-        return v0 - 6.0 * (r * r / 0.2 + max(t - onset - 0.1, 0.0))
+    onset, ramp, speed = _ONSET_S, _onset_ramp, _onset_speed
 
     def wheels(t):
         return dict.fromkeys(WHEEL_SPEED_NAMES, speed(t) * (1.0 - 0.08 * ramp(t)) / VEH.wheel_radius)

@@ -60,6 +60,7 @@ WHEEL_SPEED_NOISE_MPS = 0.15
 # (`FrontEnd._wheel_senders_told_apart`): wheels drive no car that decelerates.
 MIN_TELLING_DECEL_MPS2 = 1.0
 PRESSURE_ZERO_READINGS = 128   # free-rolling readings a pressure sensor's zero point is the median of
+PRESSURE_ZERO_AT_ZERO = 0.4    # ... and the share of them at 0 that says its zero point is 0
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
@@ -757,8 +758,10 @@ class FrontEnd:
         under the brakes, 10-30 % of an ABS's pressures on ice. The zero point is the median
         of the last `PRESSURE_ZERO_READINGS` readings, not their mean: a sensor reads no
         pressure below 0, so its noise around a true zero is cut to 0 on one side, and a mean
-        would take half a noise's width off every pressure. (A negative zero point is not seen
-        either: nothing is taken off those sensors.)"""
+        would take half a noise's width off every pressure. For the same reason a sensor that
+        reads exactly 0 in `PRESSURE_ZERO_AT_ZERO` of them or more has its zero point at 0 (its
+        median is then as likely one noise sample above it). A negative zero point is not seen
+        either: nothing is taken off those sensors."""
         raw = self._raw_pressures
         if not raw:
             return
@@ -772,7 +775,13 @@ class FrontEnd:
             return    # (a window of readings moves slowly: its median every 8th sample)
         zero = self._pressure_zero
         for name, values in readings.items():
-            if values:
+            if not values:
+                continue
+            # (reading exactly 0 this often, the zero point is within a quarter of the noise of
+            # 0: a median of readings cut at 0 would be a noise sample above it)
+            if sum(v <= 0.0 for v in values) >= PRESSURE_ZERO_AT_ZERO * len(values):
+                zero[name] = 0.0
+            else:
                 zero[name] = max(0.0, float(statistics.median_low(values)))
         self._pressure_zeroed = any(z > 0.0 for z in zero.values())
 

@@ -702,3 +702,34 @@ def test_a_pressure_sensor_reads_its_zero_point_off_when_the_brakes_are_released
             expected.append((4 * VEH.wheel_inertia * drive.omega_dot() + torques) / VEH.wheel_radius)
     assert len(forces) > 50
     assert sum(forces) / len(forces) == pytest.approx(sum(expected) / len(expected), rel=0.02)
+
+
+def test_a_pressure_sensor_at_zero_reading_noise_cut_at_zero_has_nothing_taken_off():
+    # Around a true zero half the readings are cut to 0, and their median is then as likely a
+    # small noise sample above it: nothing is taken off, so the brake torques under the brakes
+    # are those of a sensor that read exactly 0 at rest.
+    def run(noise_at_rest: bool) -> list[float]:
+        rng = random.Random(9)
+        drive = Drive(v0=20.0, decel=1.0, slip=0.02)
+        drive.pressure = _needed_pressure(1.0, 0.02, 19.5)
+        fe = make(FrontEndOptions(brake_gain_correction=False))
+        forces = []
+        for k in range(200):
+            t = 0.01 * k
+            braking = t >= 1.0
+            tb = t - 1.0
+            noise = {n: rng.gauss(0.0, 0.5) for n in PRESSURE_NAMES}
+            fe.push(t + 0.003, "ACCEL", {"accel_long": -drive.decel if braking else 0.0, "accel_lat": 0.0, "yaw_rate": 0.0})
+            if braking:
+                fe.push(t + 0.006, "PRESS", {n: max(0.0, drive.pressure + noise[n]) for n in PRESSURE_NAMES})
+            else:
+                fe.push(t + 0.006, "PRESS", {n: max(0.0, noise[n]) if noise_at_rest else 0.0 for n in PRESSURE_NAMES})
+            fe.push(t + 0.008, "REF", {"vehicle_speed_ref": drive.speed(tb) if braking else drive.v0})
+            w = drive.omega(tb) if braking else drive.v0 / VEH.wheel_radius
+            r = fe.push(t + 0.01, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w))
+            if r is not None and r.sample is not None and r.sample.time_s > 1.1:   # (windows past the onset)
+                forces.append(r.sample.tyre_force_n)
+        return forces
+
+    noisy, exact = run(True), run(False)
+    assert len(noisy) > 50 and noisy == exact

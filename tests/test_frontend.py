@@ -15,6 +15,7 @@ from frictiond.frontend import (
     FrontEnd,
     FrontEndOptions,
 )
+from frictiond.samples import PhysicalSample
 from frictiond.vehicle import GRAVITY_MPS2, VehicleParams
 
 VEH = VehicleParams()
@@ -669,67 +670,62 @@ def test_each_sample_carries_the_slips_its_filter_averaged_over(period, end_weig
     assert checked >= 2
 
 
+def _roll_then_brake(fe: FrontEnd, reading) -> tuple[Drive, list[PhysicalSample]]:
+    """A second of free rolling at 20 m/s, then gentle braking as on ice: 1 m/s² from about
+    8 bar. Each pressure sensor reads `reading(true pressure)`. The drive, and the samples whose
+    derivative window lies past the onset."""
+    drive = Drive(v0=20.0, decel=1.0, slip=0.02)
+    drive.pressure = _needed_pressure(1.0, 0.02, 19.5)
+    onset = 1.0
+    samples = []
+    for k in range(200):
+        t = 0.01 * k
+        braking = t >= onset
+        tb = t - onset
+        fe.push(t + 0.003, "ACCEL", {"accel_long": -drive.decel if braking else 0.0, "accel_lat": 0.0, "yaw_rate": 0.0})
+        true_p = drive.pressure if braking else 0.0
+        fe.push(t + 0.006, "PRESS", {n: reading(true_p) for n in PRESSURE_NAMES})
+        fe.push(t + 0.008, "REF", {"vehicle_speed_ref": drive.speed(tb) if braking else drive.v0})
+        w = drive.omega(tb) if braking else drive.v0 / VEH.wheel_radius
+        r = fe.push(t + 0.01, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w))
+        if r is not None and r.sample is not None and r.sample.time_s > onset + 0.1:
+            samples.append(r.sample)
+    return drive, samples
+
+
 @pytest.mark.parametrize("compiled", [True, False])
 @pytest.mark.parametrize("offset", [0.0, 0.8])
 def test_a_pressure_sensor_reads_its_zero_point_off_when_the_brakes_are_released(compiled, offset):
     # A pressure sensor reading `offset` bar too much (its noise, 0.5 bar, cut to 0 below zero as
     # a sensor reads no negative pressure). Free rolling for a second, then gentle braking, as on
-    # ice: 1 m/s² from about 8 bar, where 0.8 bar is 10 % of the brake torque. The brake torques
-    # are those of the true pressures: the zero point is learnt while the brakes are released,
-    # and as the median of the readings (their mean would take half the noise off every
-    # pressure with no offset at all).
+    # ice, where 0.8 bar is 10 % of the brake torque. The brake torques are those of the true
+    # pressures: the zero point is learnt while the brakes are released, and as the median of
+    # the readings (their mean would take half the noise off every pressure with no offset).
     rng = random.Random(4)
-    v0, onset = 20.0, 1.0
-    drive = Drive(v0=v0, decel=1.0, slip=0.02)
-    drive.pressure = _needed_pressure(1.0, 0.02, v0 - 0.5)
     fe = make(FrontEndOptions(brake_gain_correction=False))
     if not compiled:
         fe.core = None
-    forces, expected = [], []
-    for k in range(200):
-        t = 0.01 * k
-        braking = t >= onset
-        tb = t - onset
-        w = drive.omega(tb) if braking else v0 / VEH.wheel_radius
-        fe.push(t + 0.003, "ACCEL", {"accel_long": -drive.decel if braking else 0.0, "accel_lat": 0.0, "yaw_rate": 0.0})
-        true_p = drive.pressure if braking else 0.0
-        fe.push(t + 0.006, "PRESS", {n: max(0.0, true_p + offset + rng.gauss(0.0, 0.5)) for n in PRESSURE_NAMES})
-        fe.push(t + 0.008, "REF", {"vehicle_speed_ref": drive.speed(tb) if braking else v0})
-        r = fe.push(t + 0.01, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w))
-        if r is not None and r.sample is not None and r.sample.time_s > onset + 0.1 and all(r.sample.usable):
-            forces.append(sum(r.sample.tyre_force_n))
-            torques = sum(VEH.brake_torque_nm(i, drive.pressure) for i in range(4))
-            expected.append((4 * VEH.wheel_inertia * drive.omega_dot() + torques) / VEH.wheel_radius)
+    drive, samples = _roll_then_brake(fe, lambda p: max(0.0, p + offset + rng.gauss(0.0, 0.5)))
+    forces = [sum(s.tyre_force_n) for s in samples if all(s.usable)]
+    torques = sum(VEH.brake_torque_nm(i, drive.pressure) for i in range(4))
+    expected = (4 * VEH.wheel_inertia * drive.omega_dot() + torques) / VEH.wheel_radius
     assert len(forces) > 50
-    assert sum(forces) / len(forces) == pytest.approx(sum(expected) / len(expected), rel=0.02)
+    assert sum(forces) / len(forces) == pytest.approx(expected, rel=0.02)
 
 
 def test_a_pressure_sensor_at_zero_reading_noise_cut_at_zero_has_nothing_taken_off():
     # Around a true zero half the readings are cut to 0, and their median is then as likely a
     # small noise sample above it: nothing is taken off, so the brake torques under the brakes
     # are those of a sensor that read exactly 0 at rest.
-    def run(noise_at_rest: bool) -> list[float]:
+    def run(noise_at_rest: bool) -> list[tuple[float, ...]]:
         rng = random.Random(9)
-        drive = Drive(v0=20.0, decel=1.0, slip=0.02)
-        drive.pressure = _needed_pressure(1.0, 0.02, 19.5)
-        fe = make(FrontEndOptions(brake_gain_correction=False))
-        forces = []
-        for k in range(200):
-            t = 0.01 * k
-            braking = t >= 1.0
-            tb = t - 1.0
-            noise = {n: rng.gauss(0.0, 0.5) for n in PRESSURE_NAMES}
-            fe.push(t + 0.003, "ACCEL", {"accel_long": -drive.decel if braking else 0.0, "accel_lat": 0.0, "yaw_rate": 0.0})
-            if braking:
-                fe.push(t + 0.006, "PRESS", {n: max(0.0, drive.pressure + noise[n]) for n in PRESSURE_NAMES})
-            else:
-                fe.push(t + 0.006, "PRESS", {n: max(0.0, noise[n]) if noise_at_rest else 0.0 for n in PRESSURE_NAMES})
-            fe.push(t + 0.008, "REF", {"vehicle_speed_ref": drive.speed(tb) if braking else drive.v0})
-            w = drive.omega(tb) if braking else drive.v0 / VEH.wheel_radius
-            r = fe.push(t + 0.01, "WHEELS", dict.fromkeys(WHEEL_SPEED_NAMES, w))
-            if r is not None and r.sample is not None and r.sample.time_s > 1.1:   # (windows past the onset)
-                forces.append(r.sample.tyre_force_n)
-        return forces
+
+        def reading(p: float) -> float:
+            noise = rng.gauss(0.0, 0.5)   # (drawn at rest too: the same noise under the brakes)
+            return max(0.0, p + noise) if p > 0.0 or noise_at_rest else 0.0
+
+        _, samples = _roll_then_brake(make(FrontEndOptions(brake_gain_correction=False)), reading)
+        return [s.tyre_force_n for s in samples]
 
     noisy, exact = run(True), run(False)
     assert len(noisy) > 50 and noisy == exact

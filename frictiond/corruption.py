@@ -90,19 +90,20 @@ def _mixed(frames: list[Frame], codec: InputCodec, rate: float, seed: int) -> tu
     frames of the wheel-speed message (a share of its own frames), 1/7 duplicates; and
     `STEPPED_BACK_FRAMES` input frames stepped back 1 s. At 7 % it is that report's mix."""
     frames, n = corrupt("random payload", frames, codec, rate * 3 / 7, seed)
-    more, k = corrupt("short DLC", frames, codec, rate * 2 / 7, seed + 1)
-    frames, n = more, n + k
-    more, k = _each(frames, frozenset({codec.trigger_id}), rate / 7, seed + 2,
-                    lambda f, rng: [f._replace(data=b"\xff" * len(f.data))])
-    frames, n = more, n + k
-    more, k = corrupt("duplicate", frames, codec, rate / 7, seed + 3)
-    frames, n = more, n + k
+    frames, k = corrupt("short DLC", frames, codec, rate * 2 / 7, seed + 1)
+    n += k
+    frames, k = _each(frames, frozenset({codec.trigger_id}), rate / 7, seed + 2,
+                      lambda f, rng: [f._replace(data=b"\xff" * len(f.data))])
+    n += k
+    frames, k = corrupt("duplicate", frames, codec, rate / 7, seed + 3)
+    n += k
     ids = frozenset(codec.input_ids)
     rng = random.Random(seed + 4)
     inputs = [i for i, f in enumerate(frames) if f.can_id in ids]
-    for i in rng.sample(inputs, min(STEPPED_BACK_FRAMES, len(inputs))):
+    stepped = rng.sample(inputs, min(STEPPED_BACK_FRAMES, len(inputs)))
+    for i in stepped:
         frames[i] = frames[i]._replace(time_s=frames[i].time_s - 1.0)
-    return frames, n + min(STEPPED_BACK_FRAMES, len(inputs))
+    return frames, n + len(stepped)
 
 
 def _reorder(frames: list[Frame], ids: frozenset[int], rate: float, seed: int) -> tuple[list[Frame], int]:

@@ -501,14 +501,6 @@ enum {
 #define PRESSURE_LAG_PRIOR (10 * 10000.0 * 10000.0)
 /* FrontEnd._lag_state: the lag regression's five sums, the lag, the last sample's time and torques. */
 #define LAG_N 11
-/* FrontEnd._bias_fit (frontend._NO_BIAS_FIT): the mean of a_raw - R w', the sums' time, the
-   stretch's last sample time and acceleration, its integral and first speed, its five sums, the pool. */
-#define BIAS_N 13
-#define BIAS_MEAN 0
-#define BIAS_FIT_T 1
-#define BIAS_LAST_T 2
-#define BIAS_STRETCH_GAP 0.1
-#define BIAS_FIT_MIN_SPREAD 0.02
 #define LAG_LAG 5
 #define LAG_TIME 6
 #define LAG_TORQUES 7
@@ -518,7 +510,7 @@ enum {
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released,
-    *A_unjudged, *A_lag_state, *A_bias_fit;
+    *A_unjudged, *A_lag_state;
 
 typedef struct {
     long repeats[NW];
@@ -532,7 +524,6 @@ typedef struct {
     double unjudged;
     int model_holds, released;
     double lag[LAG_N];
-    double bias_fit[BIAS_N];
 } FEState;
 
 static int get_float_attr(PyObject *obj, PyObject *name, double *out, int *present)
@@ -638,19 +629,6 @@ static int load_state(PyObject *fe, FEState *s)
     Py_DECREF(lag);
     if (PyErr_Occurred())
         goto out;
-    PyObject *fit = PyObject_GetAttr(fe, A_bias_fit);
-    if (!fit)
-        goto out;
-    if (!PyTuple_Check(fit) || PyTuple_GET_SIZE(fit) != BIAS_N) {
-        PyErr_SetString(PyExc_TypeError, "sample_physics: _bias_fit must be a tuple of thirteen");
-        Py_DECREF(fit);
-        goto out;
-    }
-    for (int i = 0; i < BIAS_N; i++)
-        s->bias_fit[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(fit, i));
-    Py_DECREF(fit);
-    if (PyErr_Occurred())
-        goto out;
     rc = 0;
 out:
     Py_XDECREF(repeats);
@@ -712,8 +690,7 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_gain_factor, PyFloat_FromDouble(s->gain_factor)) < 0
         || set_attr_new(fe, A_model_holds, PyBool_FromLong(s->model_holds)) < 0
         || set_attr_new(fe, A_unjudged, PyFloat_FromDouble(s->unjudged)) < 0
-        || set_attr_new(fe, A_lag_state, tuple_of(s->lag, LAG_N)) < 0
-        || set_attr_new(fe, A_bias_fit, tuple_of(s->bias_fit, BIAS_N)) < 0)
+        || set_attr_new(fe, A_lag_state, tuple_of(s->lag, LAG_N)) < 0)
         goto out;
     rc = 0;
 out:
@@ -882,47 +859,6 @@ static double unexplained_torque(const FEState *s, double low, double high)
 }
 
 /* FrontEnd._update_brake_gain */
-/* FrontEnd._learn_accel_bias: the offset as the slope of the integral of a_raw minus the wheels'
-   speed over stretches of free rolling, pooled with forgetting; the mean of a_raw - R w' until
-   the samples spread far enough in time. */
-static void learn_accel_bias(FEState *s, const double *k, double t, const double *omega_dot, double a_raw,
-                             double wheel_speed)
-{
-    double *f = s->bias_fit;
-    const double error = a_raw - k[K_RADIUS] * (sum_of(omega_dot, NW) / NW);
-    if (!(fabs(error) < 2.0))
-        return;
-    const double tau = py_max(k[K_BIAS_TAU], 1e-3);
-    s->bias_samples += 1;
-    const double alpha = py_max(py_min(1.0, k[K_SAMPLE_PERIOD] / tau), 1.0 / (double)s->bias_samples);
-    double mean = f[0], fit_t = f[1], last_t = f[2], last_a = f[3], integral = f[4], v0 = f[5];
-    double sw = f[6], sx = f[7], sxx = f[8], sy = f[9], sxy = f[10], pxx = f[11], pxy = f[12];
-    mean += alpha * (error - mean);
-    const double dt = fit_t == fit_t ? t - fit_t : 0.0;
-    if (!(last_t == last_t && 0.0 < t - last_t && t - last_t <= BIAS_STRETCH_GAP)) {
-        if (sw > 0.0) {
-            pxx += sxx - sx * sx / sw;
-            pxy += sxy - sx * sy / sw;
-        }
-        sw = sx = sxx = sy = sxy = integral = 0.0;
-        v0 = wheel_speed;
-    } else {
-        integral += 0.5 * (last_a + a_raw) * (t - last_t);
-    }
-    const double keep = exp(-py_max(dt, 0.0) / tau);
-    sxx = keep * (sxx - 2.0 * dt * sx + dt * dt * sw);
-    sxy = keep * (sxy - dt * sy);
-    sx = keep * (sx - dt * sw);
-    sw = keep * sw + 1.0;
-    sy = keep * sy + integral - (wheel_speed - v0);
-    pxx *= keep;
-    pxy *= keep;
-    const double fit[BIAS_N] = {mean, t, t, a_raw, integral, v0, sw, sx, sxx, sy, sxy, pxx, pxy};
-    memcpy(f, fit, sizeof fit);
-    const double spread = pxx + sxx - sx * sx / sw;
-    s->bias = spread >= BIAS_FIT_MIN_SPREAD ? (pxy + sxy - sx * sy / sw) / spread : mean;
-}
-
 static void update_brake_gain(FEState *s, const double *k, double accel_long, double speed, const double *inertia,
                               const double *brake, const double *drive, const double *wl, const double *rates,
                               int braking)
@@ -1140,16 +1076,22 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         fastest = py_max(fastest, wl[i]);
         slowest = py_min(slowest, wl[i]);
     }
-    const int rolling = !braking && !driving && fastest - slowest <= FREE_ROLLING_SPREAD * fastest + 0.3;
-    int free_rolling = rolling;
+    int free_rolling = !braking && !driving && fastest - slowest <= FREE_ROLLING_SPREAD * fastest + 0.3;
     for (int i = 0; free_rolling && i < NW; i++)
         free_rolling = fabs(radius * omega_dot[i] - accel_long) < FREE_ROLLING_ACCEL;
     int from_ref;
     const double speed = update_speed(&s, k, t_c, wl, accel_long, !free_rolling, has_ref, ref, ref_fresh, &from_ref);
-    if (free_rolling)
-        learn_accel_bias(&s, k, t_c, omega_dot, a_raw, sum_of(wl, NW) / NW);
-    else if (!rolling)
-        s.bias_fit[BIAS_LAST_T] = NAN;     /* the stretch of free rolling ends */
+    if (free_rolling) {
+        /* FrontEnd._learn_accel_bias */
+        const double wheel_accel = radius * (sum_of(omega_dot, NW) / NW);
+        double alpha = py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_BIAS_TAU], 1e-3));
+        const double error = a_raw - wheel_accel;
+        if (fabs(error) < 2.0) {
+            s.bias_samples += 1;
+            alpha = py_max(alpha, 1.0 / (double)s.bias_samples);
+            s.bias += alpha * (error - s.bias);
+        }
+    }
     double yaw_rate = 0.0;
     int have_yaw = 0;
     if (has_yaw && (have_yaw = input_at(inputs, n_inputs - 1, &yaw_rate)) < 0)
@@ -1271,7 +1213,6 @@ static int intern_attributes(void)
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
         {&A_model_holds, "_brake_model_holds"}, {&A_unjudged, "_unjudged_s"}, {&A_lag_state, "_lag_state"},
-        {&A_bias_fit, "_bias_fit"},
     };
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (!(*names[i].slot = PyUnicode_InternFromString(names[i].name)))

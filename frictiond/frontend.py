@@ -62,12 +62,6 @@ MIN_TELLING_DECEL_MPS2 = 1.0
 PRESSURE_ZERO_READINGS = 128   # free-rolling readings a pressure sensor's zero point is the median of
 PRESSURE_ZERO_AT_ZERO = 0.4    # ... and the share of them at 0 that says its zero point is 0
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
-# The accelerometer's offset is the slope of ∫a dt − v over free rolling (`_learn_accel_bias`):
-# free-rolling samples further apart than this do not bridge (the integral would cross braking).
-BIAS_STRETCH_GAP_S = 0.1
-# ... and the slope is used once the samples' spread in time, Σw·(t − t̄)², reaches this (s²·samples;
-# about 0.15 s of rolling at 100 Hz: from there it is less noisy than the mean of a_raw − R·ω̇).
-BIAS_FIT_MIN_SPREAD = 0.02
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
 _BRAKE_MODEL_WINDOW_S = 0.2                 # the body check's window: about this much braking
@@ -353,7 +347,6 @@ class FrontEnd:
         self._accel_bias_mps2 = 0.0
         self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
         self._accel_bias_samples = 0
-        self._bias_fit = _NO_BIAS_FIT
         # Each pressure sensor's reading with the brakes released (its zero point, learnt while
         # free rolling: `_learn_pressure_zeros`), taken off its readings; the newest raw readings.
         self._pressure_zero = dict.fromkeys(PRESSURE_NAMES, 0.0)
@@ -1042,15 +1035,12 @@ class FrontEnd:
         # Only wheels that agree with each other (within what a curve explains) and accelerate
         # with the body read the ground speed.
         fastest = max(wheel_linear)
-        rolling = not braking and not driving and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
-        free_rolling = rolling and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot)
+        free_rolling = (not braking and not driving
+                        and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
+                        and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot))
         speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
         if free_rolling:
-            self._learn_accel_bias(t_c, omega_dot, accel_long_raw, sum(wheel_linear) / 4.0)
-        elif not rolling:
-            # The stretch of free rolling ends (a sample left out only for its ω̇, the noisiest
-            # of its readings, leaves the wheels at the ground's speed: the stretch bridges it).
-            self._bias_fit = self._bias_fit[:2] + (math.nan,) + self._bias_fit[3:]
+            self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
 
         yaw_rate = inputs[-1] if self._has_yaw_rate else None
         if yaw_rate is None or not math.isfinite(yaw_rate):
@@ -1216,50 +1206,18 @@ class FrontEnd:
         return (time_s - h.last_arrival_s <= self.options.stale_periods * h.period_s + 1e-3
                 or h.last_arrival_s >= time_s)
 
-    def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float,
-                          wheel_speed: float) -> None:
-        """Free rolling: the wheels' acceleration is the vehicle's; the difference is the
-        accelerometer's offset (or the road's grade, which the same correction absorbs).
-
-        Read as a slope: over a stretch of free rolling, ∫a_raw dt − v_wheels grows at the offset.
-        The wheel speeds enter as levels, not as derivatives, so their quantisation does not
-        (a 0.05 km/h step read through ω̇ is ±0.4 m/s² a sample, and the mean of a_raw − R·ω̇ over
-        a second's rolling kept ±0.05 m/s² of it: a speed drift of 0.2 m/s over a 4 s stop). The
-        stretches' centred sums are pooled with exponential forgetting (time constant
-        `accel_bias_time_constant`); until they spread far enough in time, the mean of
-        a_raw − R·ω̇ stands in.
-        """
+    def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float) -> None:
+        # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
+        # (or road grade, which the same correction absorbs).
         wheel_accel = self.vehicle.wheel_radius * (sum(omega_dot) / len(omega_dot))
-        error = accel_long_raw - wheel_accel
-        if not abs(error) < 2.0:
-            return      # (the integral bridges this sample's acceleration)
         alpha = min(1.0, self.sample_period_s / max(self.options.accel_bias_time_constant, 1e-3))
-        self._accel_bias_samples += 1
-        # The plain mean of the first samples, then the exponential forgetting: right after
-        # start-up the offset is known after a second of rolling, not only after several τ.
-        alpha = max(alpha, 1.0 / self._accel_bias_samples)
-        mean, fit_t, last_t, last_a, integral, v0, sw, sx, sxx, sy, sxy, pxx, pxy = self._bias_fit
-        mean += alpha * (error - mean)
-        dt = time_s - fit_t if fit_t == fit_t else 0.0
-        if not (last_t == last_t and 0.0 < time_s - last_t <= BIAS_STRETCH_GAP_S):
-            if sw > 0.0:    # the stretch before ends: its centred sums join the pool
-                pxx += sxx - sx * sx / sw
-                pxy += sxy - sx * sy / sw
-            sw = sx = sxx = sy = sxy = integral = 0.0
-            v0 = wheel_speed
-        else:
-            integral += 0.5 * (last_a + accel_long_raw) * (time_s - last_t)
-        # Forget, and put the time origin at this sample.
-        keep = math.exp(-max(dt, 0.0) / max(self.options.accel_bias_time_constant, 1e-3))
-        sxx = keep * (sxx - 2.0 * dt * sx + dt * dt * sw)
-        sxy = keep * (sxy - dt * sy)
-        sx = keep * (sx - dt * sw)
-        sw, sy, pxx, pxy = keep * sw, keep * sy, keep * pxx, keep * pxy
-        sw += 1.0
-        sy += integral - (wheel_speed - v0)
-        self._bias_fit = (mean, time_s, time_s, accel_long_raw, integral, v0, sw, sx, sxx, sy, sxy, pxx, pxy)
-        spread = pxx + sxx - sx * sx / sw
-        self._accel_bias_mps2 = (pxy + sxy - sx * sy / sw) / spread if spread >= BIAS_FIT_MIN_SPREAD else mean
+        error = accel_long_raw - wheel_accel
+        if abs(error) < 2.0:
+            # The plain mean of the first samples, then the exponential forgetting: right after
+            # start-up the offset is known after a second of rolling, not only after several τ.
+            self._accel_bias_samples += 1
+            alpha = max(alpha, 1.0 / self._accel_bias_samples)
+            self._accel_bias_mps2 += alpha * (error - self._accel_bias_mps2)
 
     def _update_brake_gain(
         self,
@@ -1398,17 +1356,11 @@ class FrontEnd:
 
 # Rejections of a trigger frame that give no output at all (its time is not the bus's).
 _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
-# `FrontEnd._bias_fit` before any free rolling: the mean of a_raw − R·ω̇, the time the sums are
-# at, the stretch's last sample time (NaN: none) and acceleration, its ∫a_raw dt and first wheel
-# speed, its sums Σw, Σw·t, Σw·t², Σw·y, Σw·t·y (t from the newest sample, y = ∫a_raw − Δv), and
-# the earlier stretches' pooled centred Σw·(t − t̄)² and Σw·(t − t̄)(y − ȳ).
-_NO_BIAS_FIT = (0.0, math.nan, math.nan) + (0.0,) * 10
 # What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
 _LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
-                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state",
-                 "_bias_fit")
+                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state")
 # The fault a required input's persistently rejected frames give, by kind of rejection.
 _REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
                      "clock step": "clock step"}

@@ -670,13 +670,13 @@ def test_the_confidence_counts_one_piece_of_evidence_per_abs_cycle():
 def test_every_valid_output_is_more_likely_than_not_within_ten_percent():
     # The confidence is the probability of μ_max within 10 %; the hysteresis that keeps a VALID
     # through a one-cycle dip must stay above even odds. Dev stop 638 (a threshold ABS on a Magic
-    # Formula tyre) leaves VALID at a confidence of 0.4-0.5, where a hysteresis down to 0.45 or
-    # 0.4 would have kept it VALID.
+    # Formula tyre) leaves VALID eight times at a confidence of 0.4-0.5, each of which a
+    # hysteresis down to 0.45 or 0.4 would have kept VALID.
     _stop, estimates = campaign_stop_estimates(638)
     valid = [e for e in estimates if e.status == Status.VALID]
     assert len(valid) > 300 and min(e.confidence for e in valid) >= 0.5
     left = [e for e, before in zip(estimates[1:], estimates) if before.status == Status.VALID != e.status]
-    assert sum(0.4 <= e.confidence < 0.5 for e in left) >= 2
+    assert sum(0.4 <= e.confidence < 0.5 for e in left) >= 3
 
 
 def test_a_confidence_without_any_spread_is_certain_not_a_crash():

@@ -729,33 +729,3 @@ def test_a_pressure_sensor_at_zero_reading_noise_cut_at_zero_has_nothing_taken_o
 
     noisy, exact = run(True), run(False)
     assert len(noisy) > 50 and noisy == exact
-
-
-def _offset_learnt(compiled: bool, seed: int, wheel_frames_lost: float) -> float:
-    """1.2 s of free rolling at 25 m/s, slowing by 0.3 m/s² (drag): an accelerometer reading
-    0.2 m/s² too much (noise 0.05), wheel speeds at 100 Hz quantised to 0.05 km/h (noise
-    0.09 km/h), a share of the wheel-speed frames lost. What the front end learnt, minus 0.2."""
-    rng = random.Random(seed)
-    fe = _front_end(compiled)
-    step = 0.05 / 3.6
-    for k in range(120):
-        t = 0.01 * k
-        fe.push(t + 0.003, "ACCEL", {"accel_long": -0.3 + 0.2 + rng.gauss(0.0, 0.05), "accel_lat": 0.0, "yaw_rate": 0.0})
-        fe.push(t + 0.006, "PRESS", dict.fromkeys(PRESSURE_NAMES, 0.0))
-        speeds = {n: round((25.0 - 0.3 * t + rng.gauss(0.0, 0.025)) / step) * step / VEH.wheel_radius
-                  for n in WHEEL_SPEED_NAMES}
-        if rng.random() >= wheel_frames_lost:
-            fe.push(t + 0.01, "WHEELS", speeds)
-    return fe.accel_bias_mps2 - 0.2
-
-
-@pytest.mark.parametrize("compiled", [True, False])
-def test_the_accelerometer_offset_is_read_from_the_wheels_speed_not_their_noisy_derivative(compiled):
-    # A 0.05 km/h step is ±0.4 m/s² in a wheel's ω̇ at 100 Hz: the mean of a_raw − R·ω̇ over a
-    # second kept up to ±0.04 m/s² of it, and which samples it kept (one frame in ten lost)
-    # moved it by as much, a 0.2 m/s speed drift over a 5 s stop. The slope of ∫a_raw − v has
-    # the wheels' speed levels, not their derivative, in it.
-    errors = [_offset_learnt(compiled, seed, 0.0) for seed in range(10)]
-    moved = [_offset_learnt(compiled, seed, 0.1) - e for seed, e in enumerate(errors)]
-    assert max(map(abs, errors)) < 0.02
-    assert max(map(abs, moved)) < 0.01

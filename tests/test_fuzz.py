@@ -141,8 +141,8 @@ _DRY: dict = {}
 
 def dry_piece(config):
     """The first 2.8 s of a dry stop (braking starts inside): short enough for many examples,
-    and long enough after the latest damage (ending at 2.2 s) for an ABS stop's recovery: with
-    a wheel's speeds lost for 0.25 s, VALID returns 0.53–0.54 s after them."""
+    and long enough after the damage the tests put in it for an ABS stop's recovery (a wheel's
+    speeds lost for 0.25 s: VALID again 0.53–0.54 s after them)."""
     if not _DRY:
         frames, sim = simulate_frames(config, "dry", seed=5)
         _DRY["frames"] = [f for f in frames if f.time_s < 2.8]

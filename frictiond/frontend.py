@@ -451,10 +451,12 @@ class FrontEnd:
         if rejected is not None:
             # Rejected: no sample from a wheel-speed frame that cannot be true (the last estimate
             # is repeated), a fault when they keep coming; nothing at all for a frame whose time
-            # is not the bus's (an output must not carry it).
+            # is not the bus's (an output must not carry it). Without a fault, an input that has
+            # gone silent is still stale at this frame's time: a refused trigger must not hide it.
             if not is_trigger or rejected in _NO_OUTPUT:
                 return None
-            return FrontEndResult(None, (), self._persistent_fault())
+            fault = self._persistent_fault()
+            return FrontEndResult(None, () if fault is not None else self.stale_messages(time_s), fault)
         if message in self.gate.reanchored:
             # Followed to a new level the physics could not reach (a sensor back from a dead
             # spell): the derivative window must not straddle the step.

@@ -729,3 +729,27 @@ def test_a_pressure_sensor_at_zero_reading_noise_cut_at_zero_has_nothing_taken_o
 
     noisy, exact = run(True), run(False)
     assert len(noisy) > 50 and noisy == exact
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_rejected_wheel_speed_frame_still_reports_an_input_that_went_silent(compiled):
+    # The brake pressures stop; then a wheel-speed frame arrives 2 ms after the one before it,
+    # as a burst after a stalled sender delivers them (the vcan stale test saw one). The gate
+    # refuses it as a second sender's, and its result must still name the pressures as stale.
+    # With none named, the status went from INPUT_STALE to NOT_EXCITED on each refused frame.
+    fe = _front_end(compiled)
+    drive = Drive(v0=25.0, decel=0.0, slip=0.0)
+    refused = []
+    for k in range(100):
+        t = 0.01 * k
+        fe.push(t + 0.003, "ACCEL", {"accel_long": 0.0, "accel_lat": 0.0, "yaw_rate": 0.0})
+        if t < 0.5:
+            fe.push(t + 0.006, "PRESS", dict.fromkeys(PRESSURE_NAMES, 0.0))
+        fe.push(t + 0.008, "REF", {"vehicle_speed_ref": drive.v0})
+        speeds = dict.fromkeys(WHEEL_SPEED_NAMES, drive.omega(t))
+        r = fe.push(t + 0.01, "WHEELS", speeds)
+        assert k < 60 or r is None or "PRESS" in r.stale_messages
+        if k == 80:
+            refused.append(fe.push(t + 0.012, "WHEELS", speeds))
+    assert refused[0] is not None and refused[0].sample is None
+    assert "PRESS" in refused[0].stale_messages

@@ -806,18 +806,21 @@ class FrontEnd:
         if lateral is None or not math.isfinite(lateral):
             return False
         outer = 0.5 * max(veh.track_front, veh.track_rear) * abs(lateral) / max(v, 1.0)
+
+        def faster_than_the_car(wheel_mps: float, car_mps: float) -> bool:
+            return wheel_mps > car_mps * (1.0 + WHEEL_RADIUS_SPREAD) + WHEEL_SPEED_NOISE_MPS + outer
+
         radius = veh.wheel_radius
         for message, rival in self.gate.contested_senders(time_s).items():
             names = self._message_signals.get(message, ())
             if rival is None or not names or not set(names) <= set(WHEEL_SPEED_NAMES):
                 return False
-            fastest = max(rival.get(name, 0.0) for name in names) * radius
-            if not fastest > v * (1.0 + WHEEL_RADIUS_SPREAD) + WHEEL_SPEED_NOISE_MPS + outer:
+            if not faster_than_the_car(max(rival.get(name, 0.0) for name in names) * radius, v):
                 return False
         decel = self._accel_bias_mps2 - accel
         for t, speeds in zip(self._wheel_times, self._wheel_speeds):
-            car = v + decel * max(at - t, 0.0)    # (faster before the estimate's time)
-            if max(speeds) * radius > car * (1.0 + WHEEL_RADIUS_SPREAD) + WHEEL_SPEED_NOISE_MPS + outer:
+            # (the car was faster before the estimate's time)
+            if faster_than_the_car(max(speeds) * radius, v + decel * max(at - t, 0.0)):
                 return False
         return True
 

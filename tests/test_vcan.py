@@ -81,17 +81,22 @@ def estimates(codec, frames):
     return out
 
 
-def trigger_caused(est_log_estimates, capture):
+def trigger_caused(est_log_estimates, capture, replay_answered=None):
     """The daemon's estimates caused by a trigger frame (not by its stale-input tick).
 
     The estimate log carries the trigger's socket time (ns, rounded to µs); candump prints the
     same instant truncated to µs: they match within 2 µs. Times are put on candump's grid.
+    A tick while frames are still queued is stamped with the last frame's time (`frame_now`):
+    when that frame is a trigger the replay gives no output for (after a stall, the gate reads
+    the gap as a clock step), an INPUT_STALE there is the tick's, which the replay has no loop for.
     """
     trigger_times = sorted(f.time_s for f in capture if f.can_id == TRIGGER_ID)
     caused, ticks = [], []
     for t, status, mu in est_log_estimates:
         i = bisect.bisect_left(trigger_times, t - 2e-6)
-        if i < len(trigger_times) and abs(trigger_times[i] - t) <= 2e-6:
+        at_trigger = i < len(trigger_times) and abs(trigger_times[i] - t) <= 2e-6
+        if at_trigger and not (replay_answered is not None and status == "INPUT_STALE"
+                               and round(trigger_times[i], 6) not in replay_answered):
             caused.append((round(trigger_times[i], 6), status, mu))
         else:
             ticks.append((t, status, mu))
@@ -122,6 +127,13 @@ def stale_gaps(frames, periods: float = 3.0) -> set:
     return gaps
 
 
+def wheel_speed_bursts(frames) -> int:
+    """Wheel-speed frames that came less than a quarter period after the previous one: a sender
+    catching up after a stall, which the front end refuses as a second sender's frames."""
+    ts = [f.time_s for f in frames if f.can_id == TRIGGER_ID]
+    return sum(1 for a, b in zip(ts, ts[1:]) if b - a < PERIOD_S / 4)
+
+
 def past_rate_guard(out: Path, name: str) -> tuple[Path, int]:
     """The capture as the daemon's trigger rate guard let it through (`RateGuard` at the config's
     `max_update_rate`, on the frames' bus times): a log of the frames the daemon processed, and
@@ -142,7 +154,8 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     processed, _ = past_rate_guard(out, name)
     capture = list(read_log(processed))
     live = estimates(codec, read_log(out / f"{name}-est.log"))
-    caused, ticks = trigger_caused(live, capture)
+    from_capture = estimates(codec, frictiond_replay(out, processed))
+    caused, ticks = trigger_caused(live, capture, {t for t, _, _ in from_capture})
     inputs_seen = [f for f in full_capture if f.can_id in INPUT_IDS]
     played = [f for f in read_log(original) if f.can_id in INPUT_IDS]
     assert len(inputs_seen) == len(played), "candump missed input frames"
@@ -153,13 +166,14 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     # for (nearly) every update, MuMax within tolerance. (Not bit-identical: the daemon sees nanosecond
     # socket times, candump keeps microseconds, and the estimate reacts to sub-µs timing at times;
     # MuMax is only compared where it is meant to be trusted, VALID.)
-    from_capture = estimates(codec, frictiond_replay(out, processed))
     assert [t for t, _, _ in caused] == [t for t, _, _ in from_capture]      # one estimate per trigger
     agree_capture = sum(a[1] == b[1] for a, b in zip(caused, from_capture)) / len(caused)
     assert agree_capture >= 0.98, agree_capture
     assert compressed(s for _, s, _ in caused)[:3] == compressed(s for _, s, _ in from_capture)[:3]
-    worst_capture = max(abs(a[2] - b[2]) for a, b in zip(caused, from_capture) if a[1] == b[1] == "VALID")
-    assert worst_capture <= MU_TOL, worst_capture
+    # (no VALID at all when canplayer's bursts were refused throughout; check 2 then does not apply)
+    worst_capture = max((abs(a[2] - b[2]) for a, b in zip(caused, from_capture) if a[1] == b[1] == "VALID"),
+                        default=math.nan)
+    assert not worst_capture > MU_TOL, worst_capture
     # 2. the played log through `frictiond replay` (the log's own timestamps). canplayer reproduces
     # the timing only to a few milliseconds in the slow guest (over 10 ms with a flood hogging its
     # one CPU), and the estimator's transient depends on the timestamps: statuses mostly agree, the
@@ -168,18 +182,21 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     # (Under the flood canplayer, starved of the guest's CPU, also sends some wheel-speed frames in
     # bursts 50 µs apart, which the front end skips as a gateway's repeats: a few updates fewer than
     # the log gives, the same as `frictiond replay` of the capture, which check 1 compares.)
-    assert len(caused) == len(from_log) or not against_log
     agree = sum(a[1] == b[1] for a, b in zip(caused, from_log)) / len(from_log)
     settled = int(1.0 / PERIOD_S)
     worst_settled = max(abs(a[2] - b[2]) for a, b in zip(caused[-settled:], from_log[-settled:]))
     worst = max((abs(a[2] - b[2]) for a, b in zip(caused, from_log) if a[1] == b[1] == "VALID"), default=math.nan)
     # canplayer in the guest sometimes stalls for longer than the daemon's stale limit (seen at the
     # start of a CI run): then the bus carried an input gap the log does not have, the daemon rightly
-    # said INPUT_STALE, and check 1 is the comparison that applies; this one is reported.
+    # said INPUT_STALE, and check 1 is the comparison that applies; this one is reported. So when
+    # it caught up after a stall by sending wheel-speed frames back to back (seen in CI too).
     playback_gaps = stale_gaps(inputs_seen) - stale_gaps(played)
     if playback_gaps:
         assert "INPUT_STALE" in (s for _, s, _ in caused + ticks)
-    if against_log and not playback_gaps:
+    playback_bursts = wheel_speed_bursts(inputs_seen) - wheel_speed_bursts(played)
+    if against_log and not playback_gaps and not playback_bursts:
+        assert len(caused) == len(from_log)
+        assert not math.isnan(worst_capture)
         assert caused[-1][1] == "VALID"
         assert agree >= 0.9, agree
         assert compressed(s for _, s, _ in caused)[:3] == compressed(s for _, s, _ in from_log)[:3]
@@ -193,6 +210,7 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
             "max_valid_mu_diff_vs_capture": round(worst_capture, 4), "status_agreement_vs_log": round(agree, 4),
             "max_valid_mu_diff_vs_log": round(worst, 4), "max_settled_mu_diff_vs_log": round(worst_settled, 4),
             "max_playback_timing_error_s": round(jitter, 4), "playback_gaps_not_in_log": sorted(playback_gaps),
+            "playback_bursts_not_in_log": playback_bursts,
             "final": caused[-1], "final_replay_of_log": from_log[-1]}
 
 

@@ -753,3 +753,49 @@ def test_a_rejected_wheel_speed_frame_still_reports_an_input_that_went_silent(co
             refused.append(fe.push(t + 0.012, "WHEELS", speeds))
     assert refused[0] is not None and refused[0].sample is None
     assert "PRESS" in refused[0].stale_messages
+
+
+def _release_on_ice(fe: FrontEnd, offset: float, rng: random.Random) -> dict[str, float]:
+    """40 m/s on ice, the accelerometer reading `offset` too much: 1.5 s of free rolling, 1 s of
+    braking at 1 m/s² with the wheels 10 % behind the car, the brakes let go for 0.6 s (the
+    wheels spin back up: their slip decays with τ = J·v / (R²·C·Fz) of a tyre with slip stiffness
+    C = 1, 0.14 s), then 2 s of free rolling. The learnt offset at the end of each phase."""
+    tau = VEH.wheel_inertia * 40.0 / (VEH.wheel_radius**2 * 1.0 * VEH.mass * GRAVITY_MPS2 / 4.0)
+    phases = (("rolling", 1.5, 0.3, None), ("braking", 1.0, 1.0, 0.10), ("released", 0.6, 0.35, "spin-up"),
+              ("rolling again", 2.0, 0.3, None))
+    learnt, t, v, released_at = {}, 0.0, 40.0, 0.0
+    for name, duration, decel, slip in phases:
+        end = t + duration
+        pressure = _needed_pressure(decel, 0.10, v) if name == "braking" else 0.0
+        while t < end:
+            if slip == "spin-up":
+                s = 0.10 * math.exp(-(t - released_at) / tau)
+            else:
+                s = slip or 0.0
+            w = v * (1.0 - s) / VEH.wheel_radius
+            fe.push(t + 0.003, "ACCEL", {"accel_long": -decel + offset + rng.gauss(0.0, 0.02),
+                                         "accel_lat": 0.0, "yaw_rate": 0.0})
+            fe.push(t + 0.006, "PRESS", dict.fromkeys(PRESSURE_NAMES, pressure))
+            fe.push(t + 0.01, "WHEELS", {n: w + rng.gauss(0.0, 0.01) for n in WHEEL_SPEED_NAMES})
+            v -= decel * 0.01
+            t = round(t + 0.01, 6)
+        released_at = t
+        learnt[name] = fe.accel_bias_mps2
+    return learnt
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_wheels_spinning_back_up_after_a_release_do_not_teach_the_accelerometer_offset(compiled):
+    # Released from 10 % slip at 40 m/s on ice, the wheels make up 4 m/s over half a second: up
+    # to then they accelerate ahead of the car, and an offset learnt from them as free rolling
+    # was 0.1-0.3 m/s² off, a third of the deceleration on ice, and every μ with it. Once the
+    # wheels are back on the car's speed the offset is learnt again.
+    rng = random.Random(5)
+    fe = _front_end(compiled)
+    learnt = _release_on_ice(fe, 0.2, rng)
+    assert learnt["rolling"] == pytest.approx(0.2, abs=0.01)
+    assert learnt["released"] == pytest.approx(learnt["rolling"], abs=0.01)
+    assert learnt["rolling again"] == pytest.approx(0.2, abs=0.01)
+    samples = fe._accel_bias_samples
+    _release_on_ice(fe, 0.2, rng)
+    assert fe._accel_bias_samples > samples + 100     # (learning resumed after each spin-up)

@@ -1084,19 +1084,15 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     for (int i = 0; free_rolling && i < NW; i++)
         free_rolling = fabs(radius * omega_dot[i] - accel_long) < FREE_ROLLING_ACCEL;
     int from_ref;
-    const int spun_up = t_c >= s.spun_up_at;
-    const double speed = update_speed(&s, k, t_c, wl, accel_long, !(free_rolling && spun_up), has_ref, ref, ref_fresh, &from_ref);
-    const double lag = speed - sum_of(wl, NW) / NW;
+    const double speed = update_speed(&s, k, t_c, wl, accel_long, !free_rolling, has_ref, ref, ref_fresh, &from_ref);
     if (braking || driving) {
         /* the wheels' spin-up after the brakes let go (FrontEnd, LEAST_SLIP_STIFFNESS) */
-        if (lag > SPIN_UP_LAG_LEFT && s.bias_samples >= ACCEL_BIAS_LEARNT_SAMPLES) {
+        const double lag = speed - sum_of(wl, NW) / NW;
+        if (lag > SPIN_UP_LAG_LEFT) {
             const double accel_per_slip = radius * radius * LEAST_SLIP_STIFFNESS * k[K_MASS] * GRAVITY / (4.0 * k[K_INERTIA]);
             s.spun_up_at = t_c + speed / accel_per_slip * log(lag / SPIN_UP_LAG_LEFT);
         }
-    } else if (free_rolling && !spun_up) {
-        if (lag <= SPIN_UP_LAG_LEFT)
-            s.spun_up_at = t_c;    /* caught up with the car */
-    } else if (free_rolling) {
+    } else if (free_rolling && t_c >= s.spun_up_at) {
         /* FrontEnd._learn_accel_bias */
         const double wheel_accel = radius * (sum_of(omega_dot, NW) / NW);
         double alpha = py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_BIAS_TAU], 1e-3));

@@ -64,10 +64,10 @@ PRESSURE_ZERO_AT_ZERO = 0.4    # ... and the share of them at 0 that says its ze
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
 # After the brakes (or the drive) let go, a wheel's slip decays with τ = J·v / (R²·C·Fz), C the
 # road's slip stiffness (μ per unit slip): the wheels run ahead of the body until they have made up
-# the speed they lagged the car by, and that acceleration is not the body's. They are followed
-# until their lag is below the wheel speeds' own resolution, and for no longer than that takes the
-# least stiff tyre (an ice tyre whose peak of 0.08 lies beyond 15 % slip: τ = 0.22 s at 40 m/s for
-# a mid-size car): ln(lag / resolution) time constants after the last braked sample.
+# the speed they lagged by, and that acceleration is not the body's. τ is taken at the least
+# stiffness of a road (an ice tyre whose peak of 0.08 lies beyond 15 % slip: 0.22 s at 40 m/s for
+# a mid-size car); the offset is learnt again once the lag left is below the wheel speeds' own
+# resolution: ln(lag / resolution) time constants after the last braked sample.
 LEAST_SLIP_STIFFNESS = 0.5
 SPIN_UP_LAG_LEFT_MPS = 0.05
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
@@ -1052,23 +1052,14 @@ class FrontEnd:
         free_rolling = (not braking and not driving
                         and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
                         and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot))
-        # Wheels spinning back up after the brakes let go read neither the ground's speed nor the
-        # body's acceleration: until they have made up their lag the speed coasts on the
-        # accelerometer and the offset is not learnt (`SPIN_UP_LAG_LEFT_MPS`).
-        spun_up = t_c >= self._spun_up_at_s
-        speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not (free_rolling and spun_up))
-        lag = speed - sum(wheel_linear) / 4.0
+        speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
         if braking or driving:
-            # (until an offset is learnt, the speed estimate that measures the lag coasts on an
-            # unknown one: a hold then could keep the offset from ever being learnt)
-            if lag > SPIN_UP_LAG_LEFT_MPS and self._accel_bias_samples >= ACCEL_BIAS_LEARNT_SAMPLES:
+            lag = speed - sum(wheel_linear) / 4.0
+            if lag > SPIN_UP_LAG_LEFT_MPS:
                 accel_per_slip = veh.wheel_radius ** 2 * LEAST_SLIP_STIFFNESS * veh.mass * GRAVITY_MPS2 / (4.0 * veh.wheel_inertia)
                 self._spun_up_at_s = t_c + speed / accel_per_slip * math.log(lag / SPIN_UP_LAG_LEFT_MPS)
-        elif free_rolling:
-            if spun_up:
-                self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
-            elif lag <= SPIN_UP_LAG_LEFT_MPS:
-                self._spun_up_at_s = t_c      # caught up with the car before the slowest tyre would
+        elif free_rolling and t_c >= self._spun_up_at_s:
+            self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
 
         yaw_rate = inputs[-1] if self._has_yaw_rate else None
         if yaw_rate is None or not math.isfinite(yaw_rate):

@@ -755,13 +755,12 @@ def test_a_rejected_wheel_speed_frame_still_reports_an_input_that_went_silent(co
     assert "PRESS" in refused[0].stale_messages
 
 
-def _release_on_ice(fe: FrontEnd, offset: float, rng: random.Random, stiffness: float = 1.0) -> dict[str, float]:
+def _release_on_ice(fe: FrontEnd, offset: float, rng: random.Random) -> dict[str, float]:
     """40 m/s on ice, the accelerometer reading `offset` too much: 1.5 s of free rolling, 1 s of
     braking at 1 m/s² with the wheels 10 % behind the car, the brakes let go for 0.6 s (the
     wheels spin back up: their slip decays with τ = J·v / (R²·C·Fz) of a tyre with slip stiffness
-    C = `stiffness`, 0.14 s at 1), then 2 s of free rolling. The learnt offset at the end of each
-    phase, and the samples it was learnt from during the release."""
-    tau = VEH.wheel_inertia * 40.0 / (VEH.wheel_radius**2 * stiffness * VEH.mass * GRAVITY_MPS2 / 4.0)
+    C = 1, 0.14 s), then 2 s of free rolling. The learnt offset at the end of each phase."""
+    tau = VEH.wheel_inertia * 40.0 / (VEH.wheel_radius**2 * 1.0 * VEH.mass * GRAVITY_MPS2 / 4.0)
     phases = (("rolling", 1.5, 0.3, None), ("braking", 1.0, 1.0, 0.10), ("released", 0.6, 0.35, "spin-up"),
               ("rolling again", 2.0, 0.3, None))
     learnt, t, v, released_at = {}, 0.0, 40.0, 0.0
@@ -782,8 +781,6 @@ def _release_on_ice(fe: FrontEnd, offset: float, rng: random.Random, stiffness: 
             t = round(t + 0.01, 6)
         released_at = t
         learnt[name] = fe.accel_bias_mps2
-        learnt[name + " samples"] = fe._accel_bias_samples
-    learnt["learnt while released"] = learnt["released samples"] - learnt["braking samples"]
     return learnt
 
 
@@ -802,38 +799,3 @@ def test_wheels_spinning_back_up_after_a_release_do_not_teach_the_accelerometer_
     samples = fe._accel_bias_samples
     _release_on_ice(fe, 0.2, rng)
     assert fe._accel_bias_samples > samples + 100     # (learning resumed after each spin-up)
-
-
-@pytest.mark.parametrize("compiled", [True, False])
-def test_wheels_back_on_the_cars_speed_teach_the_offset_again_before_the_least_stiff_tyre_would(compiled):
-    # The same release with a stiff tyre (C = 20, as on dry asphalt: τ = 7 ms): the wheels have
-    # made up their lag within a few hundredths of a second, and the offset is learnt again from
-    # then on, not only after the ~1 s the least stiff tyre would take.
-    fe = _front_end(compiled)
-    learnt = _release_on_ice(fe, 0.2, random.Random(6), stiffness=20.0)
-    assert learnt["learnt while released"] >= 40
-    assert learnt["released"] == pytest.approx(0.2, abs=0.01)
-    # ... and with the ice tyre nothing while the wheels still spin up
-    assert _release_on_ice(_front_end(compiled), 0.2, random.Random(6))["learnt while released"] <= 5
-
-
-@pytest.mark.parametrize("compiled", [True, False])
-def test_an_offset_not_yet_learnt_is_learnt_though_noisy_pressures_flag_braking(compiled):
-    # At 25 m/s, the accelerometer reading 0.2 m/s² too much and, for its first 0.12 s after
-    # power-up, 1.2 m/s² too little; the pressure sensors' noise (0.8 bar) flags a wheel as braked
-    # now and then. The first samples' offset is far off, the speed estimate coasting on it runs
-    # away from the wheels, and that "lag" under a flagged brake must not hold the learning that
-    # would correct it: it held it for good (7 samples in 3 s, the offset −0.97).
-    rng = random.Random(0)
-    fe = _front_end(compiled)
-    t, v = 0.0, 25.0
-    while t < 3.0:
-        settling = 1.2 if t < 0.12 else 0.0
-        fe.push(t + 0.003, "ACCEL", {"accel_long": -0.3 + 0.2 - settling + rng.gauss(0.0, 0.1),
-                                     "accel_lat": 0.0, "yaw_rate": 0.0})
-        fe.push(t + 0.006, "PRESS", {n: max(0.0, rng.gauss(0.3, 0.8)) for n in PRESSURE_NAMES})
-        fe.push(t + 0.01, "WHEELS", {n: (v + rng.gauss(0.0, 0.03)) / VEH.wheel_radius for n in WHEEL_SPEED_NAMES})
-        v -= 0.3 * 0.01
-        t = round(t + 0.01, 6)
-    assert fe._accel_bias_samples > 100
-    assert fe.accel_bias_mps2 == pytest.approx(0.2, abs=0.1)

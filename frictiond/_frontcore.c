@@ -487,8 +487,6 @@ enum {
 #define MAX_SPEED 120.0
 #define FREE_ROLLING_SPREAD 0.04
 #define FREE_ROLLING_ACCEL 2.0
-#define LEAST_SLIP_STIFFNESS 0.5
-#define SPIN_UP_LAG_LEFT 0.05
 #define BRAKE_MODEL_MARGIN 1.25
 #define BRAKE_MODEL_WINDOW 0.2
 #define LOCKED_WHEEL_RATIO 0.05
@@ -509,7 +507,7 @@ enum {
 #define GRAVITY 9.80665
 
 /* The FrontEnd attributes sample_physics reads and writes. */
-static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples, *A_spun_up,
+static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released,
     *A_unjudged, *A_lag_state;
@@ -520,7 +518,7 @@ typedef struct {
     int has_low_since[NW];
     double low_since[NW], low_unbraked[NW];
     int has_last_sample, has_speed_time, has_speed_est;
-    double last_sample, bias, unexplained, speed_time, speed_est, spun_up_at;
+    double last_sample, bias, unexplained, speed_time, speed_est;
     long bias_samples, ref_disagreements;
     double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
     double unjudged;
@@ -603,7 +601,6 @@ static int load_state(PyObject *fe, FEState *s)
     }
     if (get_float_attr(fe, A_last_sample, &s->last_sample, &s->has_last_sample) < 0
         || get_float_attr(fe, A_bias, &s->bias, NULL) < 0 || get_long_attr(fe, A_bias_samples, &s->bias_samples) < 0
-        || get_float_attr(fe, A_spun_up, &s->spun_up_at, NULL) < 0
         || get_float_attr(fe, A_unexplained, &s->unexplained, NULL) < 0
         || get_float_attr(fe, A_speed_time, &s->speed_time, &s->has_speed_time) < 0
         || get_float_attr(fe, A_speed_est, &s->speed_est, &s->has_speed_est) < 0
@@ -678,7 +675,6 @@ static int store_state(PyObject *fe, const FEState *s)
     if (set_attr_new(fe, A_last_sample, float_or_none(s->has_last_sample, s->last_sample)) < 0
         || set_attr_new(fe, A_bias, PyFloat_FromDouble(s->bias)) < 0
         || set_attr_new(fe, A_bias_samples, PyLong_FromLong(s->bias_samples)) < 0
-        || set_attr_new(fe, A_spun_up, PyFloat_FromDouble(s->spun_up_at)) < 0
         || set_attr_new(fe, A_unexplained, PyFloat_FromDouble(s->unexplained)) < 0
         || set_attr_new(fe, A_speed_time, float_or_none(s->has_speed_time, s->speed_time)) < 0
         || set_attr_new(fe, A_speed_est, float_or_none(s->has_speed_est, s->speed_est)) < 0
@@ -1085,14 +1081,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         free_rolling = fabs(radius * omega_dot[i] - accel_long) < FREE_ROLLING_ACCEL;
     int from_ref;
     const double speed = update_speed(&s, k, t_c, wl, accel_long, !free_rolling, has_ref, ref, ref_fresh, &from_ref);
-    if (braking || driving) {
-        /* the wheels' spin-up after the brakes let go (FrontEnd, LEAST_SLIP_STIFFNESS) */
-        const double lag = speed - sum_of(wl, NW) / NW;
-        if (lag > SPIN_UP_LAG_LEFT) {
-            const double accel_per_slip = radius * radius * LEAST_SLIP_STIFFNESS * k[K_MASS] * GRAVITY / (4.0 * k[K_INERTIA]);
-            s.spun_up_at = t_c + speed / accel_per_slip * log(lag / SPIN_UP_LAG_LEFT);
-        }
-    } else if (free_rolling && t_c >= s.spun_up_at) {
+    if (free_rolling) {
         /* FrontEnd._learn_accel_bias */
         const double wheel_accel = radius * (sum_of(omega_dot, NW) / NW);
         double alpha = py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_BIAS_TAU], 1e-3));
@@ -1217,7 +1206,7 @@ static int intern_attributes(void)
     struct { PyObject **slot; const char *name; } names[] = {
         {&A_repeats, "_repeats"}, {&A_dead, "_dead"}, {&A_low_since, "_low_since_s"},
         {&A_low_unbraked, "_low_unbraked_s"}, {&A_last_sample, "_last_sample_time_s"}, {&A_bias, "_accel_bias_mps2"},
-        {&A_bias_samples, "_accel_bias_samples"}, {&A_spun_up, "_spun_up_at_s"}, {&A_unexplained, "_unexplained_s"},
+        {&A_bias_samples, "_accel_bias_samples"}, {&A_unexplained, "_unexplained_s"},
         {&A_speed_time, "_speed_time_s"}, {&A_speed_est, "_speed_estimate_mps"},
         {&A_ref_disagreements, "_ref_disagreements"}, {&A_gain_tt, "_gain_sum_tt"}, {&A_gain_tn, "_gain_sum_tn"},
         {&A_recent_weight, "_recent_weight_nm"},

@@ -62,14 +62,6 @@ MIN_TELLING_DECEL_MPS2 = 1.0
 PRESSURE_ZERO_READINGS = 128   # free-rolling readings a pressure sensor's zero point is the median of
 PRESSURE_ZERO_AT_ZERO = 0.4    # ... and the share of them at 0 that says its zero point is 0
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
-# After the brakes (or the drive) let go, a wheel's slip decays with τ = J·v / (R²·C·Fz), C the
-# road's slip stiffness (μ per unit slip): the wheels run ahead of the body until they have made up
-# the speed they lagged by, and that acceleration is not the body's. τ is taken at the least
-# stiffness of a road (an ice tyre whose peak of 0.08 lies beyond 15 % slip: 0.22 s at 40 m/s for
-# a mid-size car); the offset is learnt again once the lag left is below the wheel speeds' own
-# resolution: ln(lag / resolution) time constants after the last braked sample.
-LEAST_SLIP_STIFFNESS = 0.5
-SPIN_UP_LAG_LEFT_MPS = 0.05
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
 _BRAKE_MODEL_WINDOW_S = 0.2                 # the body check's window: about this much braking
@@ -355,7 +347,6 @@ class FrontEnd:
         self._accel_bias_mps2 = 0.0
         self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
         self._accel_bias_samples = 0
-        self._spun_up_at_s = -math.inf     # the wheels read the body's acceleration again from then
         # Each pressure sensor's reading with the brakes released (its zero point, learnt while
         # free rolling: `_learn_pressure_zeros`), taken off its readings; the newest raw readings.
         self._pressure_zero = dict.fromkeys(PRESSURE_NAMES, 0.0)
@@ -1053,12 +1044,7 @@ class FrontEnd:
                         and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
                         and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot))
         speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
-        if braking or driving:
-            lag = speed - sum(wheel_linear) / 4.0
-            if lag > SPIN_UP_LAG_LEFT_MPS:
-                accel_per_slip = veh.wheel_radius ** 2 * LEAST_SLIP_STIFFNESS * veh.mass * GRAVITY_MPS2 / (4.0 * veh.wheel_inertia)
-                self._spun_up_at_s = t_c + speed / accel_per_slip * math.log(lag / SPIN_UP_LAG_LEFT_MPS)
-        elif free_rolling and t_c >= self._spun_up_at_s:
+        if free_rolling:
             self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
 
         yaw_rate = inputs[-1] if self._has_yaw_rate else None
@@ -1379,8 +1365,7 @@ _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
 _LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
-                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_spun_up_at_s",
-                 "_lag_state")
+                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state")
 # The fault a required input's persistently rejected frames give, by kind of rejection.
 _REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
                      "clock step": "clock step"}

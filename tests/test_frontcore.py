@@ -175,7 +175,7 @@ def test_history_push_is_the_same_on_both_paths():
 
 # The state `_frontcore.sample_physics` carries between samples (on the FrontEnd's attributes).
 PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_sample_time_s", "_accel_bias_mps2",
-                 "_accel_bias_samples", "_spun_up_at_s", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
+                 "_accel_bias_samples", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
                  "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_model_holds", "_unjudged_s",
                  "_lag_state")

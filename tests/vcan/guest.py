@@ -106,8 +106,9 @@ class Candump:
     def __init__(self, out: Path, name: str, filters: str = "") -> None:
         self.path = out / f"{name}-capture.log"
         self.fh = open(self.path, "w")
-        # the same 1 MiB receive buffer frictiond asks for: at the default (about 300 frames) a
-        # stall of the guest's one CPU drops frames from the capture, not from the bus
+        # the same 1 MiB receive buffer frictiond asks for (`busio.RECEIVE_BUFFER_BYTES`; not
+        # imported: python-can's import costs seconds in the guest): at the default (about 300
+        # frames) a stall of the guest's one CPU drops frames from the capture, not from the bus
         self.proc = subprocess.Popen(["candump", "-L", "-r", str(1 << 20), IFACE + filters], stdout=self.fh)
         time.sleep(0.2)
 

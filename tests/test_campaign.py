@@ -12,7 +12,7 @@ import pytest
 from frictiond.campaign import draw as draw_mod
 from frictiond.campaign.abs_control import ABS_FAMILIES
 from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, draw_stop, seeds_for
-from frictiond.campaign.report import full_report, target_rows
+from frictiond.campaign.report import format_families, full_report, target_rows
 from frictiond.campaign.run import load_rows, run_campaign, save_rows
 from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, WHEEL_MESSAGE
 from frictiond.campaign.simulate import simulate_stop
@@ -162,6 +162,13 @@ def test_a_small_campaign_runs_end_to_end_and_reports(tmp_path):
     for needle in ("== targets", "burckhardt-rls", "== per family", "abs=", "manoeuvre=", "== distributions",
                    "== worst 3 stops", "python benchmarks/campaign.py --reproduce"):
         assert needle in text
+    # Each stop counted once per grouping, the cars' sensors among them (with the master
+    # cylinder's pressure only, no wheel torque is known once an ABS has released a wheel).
+    marked = [dict(r, master_only=i < 2) for i, r in enumerate(rows)]
+    counts = {line.split()[0]: int(line.split()[1]) for line in format_families(marked).splitlines()
+              if line.startswith(("pressures=", "wheel_hz="))}
+    assert counts["pressures=master-only"] == 2 and counts["pressures=per-wheel"] == 4
+    assert sum(v for k, v in counts.items() if k.startswith("wheel_hz=")) == 6
     names = [t[0] for t in target_rows(rows, "lugre")]
     assert len(names) == 14 and names[-1].endswith("0.9")
     path = tmp_path / "rows.json"

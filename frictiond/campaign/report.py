@@ -136,12 +136,12 @@ def format_families(rows: Sequence[Row]) -> str:
     head = f"{'family':38s} {'n':>4s}  " + "  |  ".join(f"{ESTIMATORS[p] + ': ' + sub:>33s}" for p in ESTIMATORS)
     lines = ["== per family (MAE: mean over stops with VALID in span; MAE✓: ≤ 0.05 and ≤ 12 %; cov: VALID "
              "≥ 80 % of span; fV: false VALID share; FLT: stops with FAULT) ==", head, "-" * len(head)]
-    for key in ("abs", "tyre", "manoeuvre", "surfaces_class"):
+    for key, group_of in _FAMILY_GROUPS.items():
         groups: dict[str, list[Row]] = defaultdict(list)
         for r in rows:
-            groups[_surface_class(r) if key == "surfaces_class" else r[key]].append(r)
+            groups[group_of(r)].append(r)
         for name in sorted(groups):
-            lines.append(_group_line(f"{key.split('_')[0]}={name}", groups[name]))
+            lines.append(_group_line(f"{key}={name}", groups[name]))
         lines.append("")
     groups = defaultdict(list)
     for r in rows:
@@ -154,6 +154,19 @@ def format_families(rows: Sequence[Row]) -> str:
 def _surface_class(r: Row) -> str:
     """Surface labels without the tyre family's prefix: dry/wet/snow/ice/cobblestone, joined."""
     return "|".join(s.replace("mf-", "").replace("_asphalt", "") for s in str(r["surfaces"]).split("|"))
+
+
+# The per-family table's groupings: the draw's families, and the car's sensors where they decide
+# what can be measured at all (with the master cylinder's pressure only, no wheel's brake torque is
+# known once an ABS has released a wheel).
+_FAMILY_GROUPS: dict[str, Callable[[Row], str]] = {
+    "abs": lambda r: str(r["abs"]),
+    "tyre": lambda r: str(r["tyre"]),
+    "manoeuvre": lambda r: str(r["manoeuvre"]),
+    "surfaces": _surface_class,
+    "pressures": lambda r: "master-only" if r.get("master_only") else "per-wheel",
+    "wheel_hz": lambda r: str(r.get("wheel_hz")),
+}
 
 
 def format_distributions(rows: Sequence[Row]) -> str:

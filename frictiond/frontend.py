@@ -399,6 +399,12 @@ class FrontEnd:
         return self._brake_gain_factor
 
     @property
+    def wheel_torques_unknown(self) -> bool:
+        """Whether no wheel's brake torque is known: the car sends one master-cylinder pressure
+        for all wheels, and an ABS has released wheels in this stop (`_brake_released`)."""
+        return self.pressures_are_master and self._brake_released
+
+    @property
     def accel_bias_mps2(self) -> float:
         return self._accel_bias_mps2
 

@@ -43,6 +43,11 @@ def make_estimator(config: Config, sample_period_s: float = 0.01) -> Any:
     raise ValueError(f"estimator.kind: unknown estimator {kind!r}")
 
 
+# Why a master-cylinder-only car has no wheel μ under ABS (`PipelineStats.unmeasured`).
+WHEEL_TORQUES_UNKNOWN = ("wheel brake torques unknown (one master-cylinder pressure for all wheels, "
+                         "and an ABS released wheels)")
+
+
 @dataclass
 class PipelineStats:
     frames_read: int = 0
@@ -56,6 +61,8 @@ class PipelineStats:
     faults: Counter = field(default_factory=Counter)
     # Updates whose estimate would have been VALID, by the reason it was not (input_quality).
     not_valid: Counter = field(default_factory=Counter)
+    # Braking updates at which no wheel's μ could be measured, by the reason.
+    unmeasured: Counter = field(default_factory=Counter)
 
     @property
     def ignored_frames(self) -> int:
@@ -193,6 +200,8 @@ class Pipeline:
                 self.stats.faults[result.fault] += 1
                 self._recent_faults.append(time_s)
             self.last_sample = result.sample
+            if result.sample.braking and self.front_end.wheel_torques_unknown:
+                self.stats.unmeasured[WHEEL_TORQUES_UNKNOWN] += 1
             estimate = self.estimator.update(result.sample)
             while self._recent_faults and self._recent_faults[0] < time_s - FAULT_WINDOW_S:
                 self._recent_faults.popleft()

@@ -89,6 +89,10 @@ class ReplaySummary:
                 f"{k}: {v * (self.measured_trigger_period_s or self.trigger_period_s):.2f} s" for k, v in s.not_valid.most_common())
                 + f"  (VALID → CONVERGING while more than {LEAVE_VALID_SHARE:.0%} of the input frames of the last "
                 "second were rejected as corrupt)")
+        if s.unmeasured:
+            lines.append("no wheel μ        " + "; ".join(
+                f"{v * (self.measured_trigger_period_s or self.trigger_period_s):.2f} s: {k}"
+                for k, v in s.unmeasured.most_common()))
         f = self.final
         if f is not None:
             wheels = " ".join(f"{w} {m:.3f}" for w, m in zip(WHEELS, f.wheel_mu_max))

@@ -152,6 +152,24 @@ def test_master_cylinder_only_cars_send_no_wheel_pressures():
             assert 0xD0 in ids and 0xD4 not in ids and sources == {PRESSURE_MESSAGE}
 
 
+def test_a_replay_says_when_no_wheel_torque_is_known_under_abs():
+    """With one master-cylinder pressure for all wheels, no wheel's brake torque is known once
+    the ABS has released a wheel: the replay's summary says for how long, and why."""
+    from frictiond.pipeline import WHEEL_TORQUES_UNKNOWN, Pipeline
+    from frictiond.replay import replay_frames
+
+    spec = draw_stop(11, "a")
+    seconds = {}
+    for master_only in (True, False):
+        stop = simulate_stop(dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, master_only=master_only)))
+        summary = replay_frames(Pipeline(stop.config("lugre-tr")), stop.frames)
+        seconds[master_only] = summary.stats.unmeasured[WHEEL_TORQUES_UNKNOWN] * summary.trigger_period_s
+        assert ("no wheel μ" in summary.format()) == master_only
+    braking = [r["time_s"] for r in stop.truth if r["braking"] > 0.5]   # (the car then stands braked)
+    assert 0.5 * (braking[-1] - braking[0]) < seconds[True] <= stop.truth[-1]["time_s"] - braking[0]
+    assert seconds[False] == 0.0
+
+
 def test_a_small_campaign_runs_end_to_end_and_reports(tmp_path):
     rows = run_campaign(seeds_for("dev", 6), workers=0, chunk=4)
     assert [r["seed"] for r in rows] == list(range(6))

@@ -48,8 +48,13 @@ class ReplaySummary:
     suspect_share: float = 0.0        # ... and its share of rejected/repaired input at the end
     relaxation_m: float = 0.0         # the tyre's relaxation length learnt (`relaxation`)
 
+    @property
+    def update_period_s(self) -> float:
+        """The time one update stands for: the wheel-speed period as measured, else the DBC's."""
+        return self.measured_trigger_period_s or self.trigger_period_s
+
     def status_seconds(self) -> dict[str, float]:
-        period = self.measured_trigger_period_s or self.trigger_period_s
+        period = self.update_period_s
         return {Status(s).name: n * period for s, n in sorted(self.stats.status_updates.items())}
 
     def format(self, truth_path: str | None = None) -> str:
@@ -86,12 +91,12 @@ class ReplaySummary:
             lines.append("faults            " + "; ".join(f"{k}: {v}" for k, v in s.faults.most_common(5)))
         if s.not_valid:
             lines.append("not VALID         " + "; ".join(
-                f"{k}: {v * (self.measured_trigger_period_s or self.trigger_period_s):.2f} s" for k, v in s.not_valid.most_common())
+                f"{k}: {v * self.update_period_s:.2f} s" for k, v in s.not_valid.most_common())
                 + f"  (VALID → CONVERGING while more than {LEAVE_VALID_SHARE:.0%} of the input frames of the last "
                 "second were rejected as corrupt)")
         if s.unmeasured:
             lines.append("no wheel μ        " + "; ".join(
-                f"{v * (self.measured_trigger_period_s or self.trigger_period_s):.2f} s: {k}"
+                f"{v * self.update_period_s:.2f} s: {k}"
                 for k, v in s.unmeasured.most_common()))
         f = self.final
         if f is not None:

@@ -188,8 +188,8 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     worst = max((abs(a[2] - b[2]) for a, b in zip(caused, from_log) if a[1] == b[1] == "VALID"), default=math.nan)
     # canplayer in the guest sometimes stalls for longer than the daemon's stale limit (seen at the
     # start of a CI run): then the bus carried an input gap the log does not have, the daemon rightly
-    # said INPUT_STALE, and check 1 is the comparison that applies; this one is reported. So when
-    # it caught up after a stall by sending wheel-speed frames back to back (seen in CI too).
+    # said INPUT_STALE, and check 1 is the comparison that applies; this one is reported. The same
+    # when it caught up after a stall by sending wheel-speed frames back to back (seen in CI too).
     playback_gaps = stale_gaps(inputs_seen) - stale_gaps(played)
     if playback_gaps:
         assert "INPUT_STALE" in (s for _, s, _ in caused + ticks)

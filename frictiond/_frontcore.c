@@ -16,7 +16,7 @@
 
 #define NW 4
 
-/* frontend._glitch_value: whether sample k of one wheel's speeds y (n of them) disagrees, the
+/* wheel_speed_filter._glitch_value: whether sample k of one wheel's speeds y (n of them) disagrees, the
  * same way and by more than `threshold`, with its neighbours' interpolation and with each side's
  * own trend (a sensor glitch; a wheel turning around deep in slip follows each side's trend). */
 static int glitch_at(const double *t, const double *y, Py_ssize_t n, Py_ssize_t k, double threshold)
@@ -35,7 +35,7 @@ static int glitch_at(const double *t, const double *y, Py_ssize_t n, Py_ssize_t 
            || (da < -threshold && db < -threshold && dc < -threshold);
 }
 
-/* frontend._quadratic_fit on times[lo, lo + m) and each wheel's speeds y[w * stride + k]: ω(t_c),
+/* wheel_speed_filter._quadratic_fit on times[lo, lo + m) and each wheel's speeds y[w * stride + k]: ω(t_c),
  * dω/dt(t_c) and the matched torque weights of those m samples (into weights[0, m)). 0 for
  * timestamps too degenerate for the closed form. scratch: 4 * (m + 1) doubles. */
 static int quadratic_fit(const double *times, const double *y, Py_ssize_t stride, Py_ssize_t lo, Py_ssize_t m,
@@ -65,7 +65,7 @@ static int quadratic_fit(const double *times, const double *y, Py_ssize_t stride
         omega[w] = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
         omega_dot[w] = (c01 * b0 + c11 * b1 + c12 * b2) * inv / h;
     }
-    /* frontend._matched_weights with coef = (c01, c11, c12)·inv/h. */
+    /* wheel_speed_filter._matched_weights with coef = (c01, c11, c12)·inv/h. */
     const double q0 = c01 * inv / h, q1 = c11 * inv / h, q2 = c12 * inv / h;
     for (Py_ssize_t k = 0; k < m; k++)
         c[k] = q0 + q1 * u[k] + q2 * u[k] * u[k];
@@ -845,7 +845,7 @@ static void learn_pressure_lag(FEState *s, const double *k, double brake, double
     s->lag[0] = s_bb, s->lag[1] = s_bd, s->lag[2] = s_dd, s->lag[3] = s_bn, s->lag[4] = s_dn;
 }
 
-/* FrontEnd's _unexplained_torque, on the window sums of `s`. */
+/* body_equation._unexplained_torque, on the window sums of `s`. */
 static double unexplained_torque(const FEState *s, double low, double high)
 {
     const double mean_needed = s->recent_needed / s->recent_weight;

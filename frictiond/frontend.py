@@ -10,7 +10,7 @@ Per wheel-speed (trigger) frame the front end
    which arrive with their own phase, at that instant;
 3. estimates the vehicle speed (reference sensor when present and fresh, otherwise an
    accelerometer-driven observer corrected by the wheels), the accelerometer offset and a
-   brake-gain correction from the body equation (pads move ±20 % in service);
+   brake-gain correction from the body equation (pads move ±20 % in service; `body_equation`);
 4. computes normal loads (model.md, physics signs), tyre forces from the wheel equation,
    utilised friction and slip, and gates each wheel's sample.
 
@@ -22,10 +22,7 @@ import math
 import statistics
 from collections import deque
 from dataclasses import dataclass
-from operator import mul
 from typing import Any, Iterable, Mapping
-
-import numpy as np
 
 try:
     # The derivative filter's fit, the inputs' interpolation and matched sums and the history
@@ -36,9 +33,11 @@ except ImportError:  # pragma: no cover - depends on the install
     compiled_front = None
 
 from .abs_activity import ABS_FLAG_NAMES, MASTER_PRESSURE_NAME, AbsActivity
+from .body_equation import LEARNT_STATE, BodyEquation
 from .plausibility import InputGate
 from .samples import PhysicalSample
 from .vehicle import GRAVITY_MPS2, VehicleParams
+from .wheel_speed_filter import SUSPECT_JERK_RADPS3, WheelSpeedFilter
 
 WHEEL_SPEED_NAMES = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
 _FL, _FR, _RL, _RR = WHEEL_SPEED_NAMES
@@ -62,43 +61,9 @@ MIN_TELLING_DECEL_MPS2 = 1.0
 PRESSURE_ZERO_READINGS = 128   # free-rolling readings a pressure sensor's zero point is the median of
 PRESSURE_ZERO_AT_ZERO = 0.4    # ... and the share of them at 0 that says its zero point is 0
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
-_BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
-_BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
-_BRAKE_MODEL_WINDOW_S = 0.2                 # the body check's window: about this much braking
-# A wheel slower than this share of the car's speed (and 0.3 m/s) is locked: its brake clamps it
-# and passes only the tyre's sliding force, not the torque its pressure could give.
-LOCKED_WHEEL_RATIO = 0.05      # (also in _frontcore.c)
-# What the body equation cannot resolve, as a torque: an accelerometer offset and the road's grade
-# (this much of a deceleration) and each wheel's pressure offset (bar, times its gain). A smaller
-# disagreement proves no signal wrong, however large its ratio (ice, where the brake torques are
-# of the order of the wheels' inertia torques). (Also in _frontcore.c.)
-BODY_ACCEL_TOLERANCE_MPS2 = 0.05
-PRESSURE_TOLERANCE_BAR = 0.25
-# ... and until free rolling has taught the accelerometer's offset (this many samples), the
-# offset a sensor may have (a fault seen right after start-up would be the accelerometer's).
-UNLEARNT_ACCEL_TOLERANCE_MPS2 = 0.3
-ACCEL_BIAS_LEARNT_SAMPLES = 50
-# ... and while the brakes' torque moves, what a pressure sensor trailing it by this long misses
-# (a pedal applied at 1,500 bar/s, an ABS dump: tens of bar).
-PRESSURE_SENSOR_LAG_S = 0.04
-# The pressure sensors' own lag, identified from the body equation (`_learn_pressure_lag`), is
-# taken as at most this (a first-order lag of a few tens of ms; more would be a broken sensor),
-# learnt over about this much braking, with a prior of "no lag" weighing like ten samples of a
-# pressure moving 10 kN·m/s. (Also in _frontcore.c.)
-MAX_PRESSURE_LAG_S = 0.05
-# ... and below this, not told from none: a lag-free sensor's fit wanders by up to ~1 ms (the
-# body equation's noise, the torques' rates being finite differences), and advancing the torques
-# by that only adds noise.
-MIN_PRESSURE_LAG_S = 0.002
-PRESSURE_LAG_TIME_CONSTANT_S = 5.0
-_PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
 MAX_PRESSURE_BAR = 350.0
 MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 MAX_SPEED_MPS = 120.0
-# Under ABS a wheel's acceleration changes by at most ~800 rad/s² within 10 ms (pressure moving a few
-# thousand bar/s on ~25 N·m/bar over ~1.2 kg·m², and the tyre force past its peak): a sample further
-# than this × dt² off its own trend is suspect until confirmed or repaired.
-SUSPECT_JERK_RADPS3 = 80_000.0
 BODY_WHEELS_TOLERANCE = 0.25   # the body's and the wheels' total force agree within this (pad friction ±20 %)
 
 
@@ -119,7 +84,7 @@ class FrontEndOptions:
     stale_periods: float = 3.0            # an input older than this many periods is stale
     default_period: float = 0.01          # s, when the DBC gives no cycle time
     # rad/s a glitch sample is off its neighbours and both sides' trends, on top of what the wheel's
-    # acceleration can change within a sample (`SUSPECT_JERK_RADPS3`·period²; see `_glitch_value`)
+    # acceleration can change within a sample (`SUSPECT_JERK_RADPS3`·period²; see `wheel_speed_filter._glitch_value`)
     spike_threshold: float = 2.0
     max_gap: float = 0.25                 # s between wheel-speed frames before the filter restarts
     reorder_window: float = 0.05          # s; an older wheel-speed frame within this is skipped, not a restart
@@ -230,7 +195,7 @@ class _MessageHistory:
         return values[0]
 
 
-class FrontEnd:
+class FrontEnd(WheelSpeedFilter, BodyEquation):
     """Turns decoded inputs into `PhysicalSample`s, one per trigger (wheel-speed) message."""
 
     def __init__(
@@ -344,9 +309,8 @@ class FrontEnd:
         self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
         self._speed_estimate_mps: float | None = None
         self._speed_time_s: float | None = None
-        self._accel_bias_mps2 = 0.0
+        self._reset_body_equation()
         self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
-        self._accel_bias_samples = 0
         # Each pressure sensor's reading with the brakes released (its zero point, learnt while
         # free rolling: `_learn_pressure_zeros`), taken off its readings; the newest raw readings.
         self._pressure_zero = dict.fromkeys(PRESSURE_NAMES, 0.0)
@@ -354,19 +318,6 @@ class FrontEnd:
         self._pressure_zero_samples = 0
         self._pressure_zeroed = False
         self._raw_pressures: dict[str, float] = {}
-        self._brake_gain_factor = 1.0
-        self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
-        # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...
-        self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
-        self._recent_lag_nm = 0.0          # ... Σ T × what the pressure sensors' lag may hide (signed)
-        self._last_brake_nm = 0.0
-        self._brake_released = False       # one master pressure overstating the brakes: an ABS at work
-        self._brake_model_holds = True
-        self._unjudged_s = 0.0             # time since a sample last entered that window
-        # The pressure-lag regression (`_learn_pressure_lag`): Σ B², Σ B·Ḃ, Σ Ḃ², Σ B·N, Σ Ḃ·N, the
-        # lag it gives, then the time and the four matched brake torques of the last sample (their
-        # rates). One tuple, replaced whole, so that a suspect sample's state is put back as is.
-        self._lag_state: tuple[float, ...] = (0.0,) * 6 + (math.nan, 0.0, 0.0, 0.0, 0.0)
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
         self._ref_disagreements = 0
@@ -393,25 +344,6 @@ class FrontEnd:
         measured = self.measured_period_s
         nominal = self.declared_period_s
         return measured is not None and not 0.6 * nominal <= measured <= 1.6 * nominal
-
-    @property
-    def brake_gain_factor(self) -> float:
-        return self._brake_gain_factor
-
-    @property
-    def wheel_torques_unknown(self) -> bool:
-        """Whether no wheel's brake torque is known: the car sends one master-cylinder pressure
-        for all wheels, and an ABS has released wheels in this stop (`_brake_released`)."""
-        return self.pressures_are_master and self._brake_released
-
-    @property
-    def accel_bias_mps2(self) -> float:
-        return self._accel_bias_mps2
-
-    @property
-    def pressure_lag_s(self) -> float:
-        """The pressure sensors' lag behind the brakes, as learnt from the body equation."""
-        return self._lag_state[5]
 
     # -- staleness ---------------------------------------------------------------------------
     def stale_messages(self, now_s: float) -> tuple[str, ...]:
@@ -508,7 +440,7 @@ class FrontEnd:
                 # (the next sample has the same window centre: the observer would restart at
                 # the fastest wheel, every slip zero for the rest of the stop).
                 _, self._speed_estimate_mps, self._speed_time_s, self._last_sample_time_s, learnt = before
-                for name, value in zip(_LEARNT_STATE, learnt):
+                for name, value in zip(LEARNT_STATE, learnt):
                     setattr(self, name, value)
 
     def _persistent_fault(self) -> str | None:
@@ -565,7 +497,7 @@ class FrontEnd:
             return FrontEndResult(None, stale, None)
         # (what this sample will teach, as it was: put back if its frame is revoked, `_take_back`)
         self._before_sample = (time_s, self._speed_estimate_mps, self._speed_time_s, self._last_sample_time_s,
-                               [getattr(self, name) for name in _LEARNT_STATE])
+                               [getattr(self, name) for name in LEARNT_STATE])
         if (self._newest_suspect() or self._input_lost(time_s)
                 or (self.gate.contested(time_s) and not self._wheel_senders_told_apart(time_s))):
             result = self._suspect_sample(stale)
@@ -583,61 +515,6 @@ class FrontEnd:
             self._mark_body_mu(result.sample)
             result.sample.input_suspect_share = self.gate.suspect_share()
         return result
-
-    def _attach_slip_spread(self, sample: PhysicalSample) -> None:
-        """`sample.slip_spread`: each wheel's slip at the two ends of the window the torques and
-        ω̇ were averaged over, with the weights that give that average's mean time and spread.
-
-        Under ABS a wheel crosses its peak in one or two samples: μ read through the filter is
-        the mean over that sweep, below the peak wherever the curve bends (10–25 % at 50 Hz on a
-        sharp Magic Formula peak). The estimator counts what that mean takes off its fitted
-        curve as uncertainty of the peak. The ends' slips come from their own wheel speeds
-        against the wheel's ground speed carried back or forward by the body's deceleration."""
-        weights = self._torque_weights
-        v = sample.speed_mps
-        if weights is None or not v > 1.0:
-            return
-        times = list(self._wheel_times)
-        n = len(times)
-        centre = n // 2
-        t_c = times[centre]
-        lo, hi = -1, -1
-        mean = second = 0.0
-        for k in range(n):
-            w = weights[k]
-            if w > 0.0:
-                if lo < 0:
-                    lo = k
-                hi = k
-                d = times[k] - t_c
-                mean += w * d
-                second += w * d * d
-        if not 0 <= lo < centre < hi:
-            return
-        d_lo, d_hi = times[lo] - t_c, times[hi] - t_c
-        det = d_lo * d_hi * (d_hi - d_lo)
-        if not det < 0.0:
-            return
-        # Two weights at the ends that reproduce the filter's first two moments in time.
-        a_lo = min(max((mean * d_hi * d_hi - second * d_hi) / det, 0.0), 0.5)
-        a_hi = min(max((d_lo * second - d_lo * d_lo * mean) / det, 0.0), 0.5)
-        accel = self._sample_accel
-        accel = accel - self._accel_bias_mps2 if accel is not None and math.isfinite(accel) else 0.0
-        ground_lo, ground_hi = 1.0 + accel * d_lo / v, 1.0 + accel * d_hi / v
-        rows = self._wheel_speeds
-        at_lo, at_c, at_hi = rows[lo], rows[centre], rows[hi]
-        spread = []
-        for i in range(4):
-            slip = sample.slip[i]
-            w_c = at_c[i]
-            if not (w_c > 0.5 and 0.0 <= slip < 1.0):
-                spread.append((slip, slip))
-                continue
-            rolling = (1.0 - slip) / w_c
-            spread.append((max(0.0, 1.0 - rolling * at_lo[i] / ground_lo),
-                           max(0.0, 1.0 - rolling * at_hi[i] / ground_hi)))
-        sample.slip_spread = tuple(spread)
-        sample.slip_spread_weights = (a_lo, a_hi)
 
     def _input_lost(self, now_s: float) -> bool:
         """Whether a required message's next frame is overdue (lost, or rejected by the gate):
@@ -658,9 +535,9 @@ class FrontEnd:
         fitted, and it teaches the front end nothing: the learnt state is put back and the speed
         estimate coasts on the accelerometer."""
         speed_before = (self._speed_estimate_mps, self._speed_time_s)
-        learnt = [getattr(self, name) for name in _LEARNT_STATE]
+        learnt = [getattr(self, name) for name in LEARNT_STATE]
         result = self._compute_sample(stale)
-        for name, value in zip(_LEARNT_STATE, learnt):
+        for name, value in zip(LEARNT_STATE, learnt):
             setattr(self, name, value)
         if result.sample is not None:
             result.sample.usable = (False, False, False, False)
@@ -704,24 +581,6 @@ class FrontEnd:
             tuple([value(n, t) for n in ABS_FLAG_NAMES[1:]]) if self._has_wheel_abs_flags else (None,) * 4)
 
     # -- the physics ---------------------------------------------------------------------------
-    def _fit_wheels(self) -> tuple[float, list[float], list[float], bool]:
-        """`_fit_window`, and when it finds a glitch (`_glitch_value`), the sample repaired in the
-        window for good and the fit made again: (t_c, ω(t_c), dω/dt(t_c), glitch)."""
-        fitted = self._fit_window()
-        if not fitted[3]:
-            return fitted
-        k = len(self._wheel_times) - 3
-        times, speeds = self._wheel_times, self._wheel_speeds
-        threshold = self.glitch_threshold
-        columns = list(zip(*speeds))
-        repaired = []
-        for y in columns:
-            value = _glitch_value(times, y, k, threshold)
-            repaired.append(y[k] if value is None else value)
-        speeds[k] = tuple(repaired)
-        t_c, omega, omega_dot, _ = self._fit_window()
-        return t_c, omega, omega_dot, True
-
     def _coast_speed(self, before: tuple[float | None, float | None], sample: PhysicalSample) -> None:
         """The speed estimate carried over a suspect sample by the accelerometer alone: a
         corrupted or spoofed wheel speed pulls it up (a wheel faster than the estimate), and under
@@ -846,82 +705,12 @@ class FrontEnd:
         by_forces = -forces / veh.mass + self._accel_bias_mps2
         return other if abs(other - by_forces) < abs(taken - by_forces) else taken
 
-    def _newest_suspect(self) -> bool:
-        """Whether a wheel's newest sample, or the one before it, leaves the trend of the samples
-        before it by more than `SUSPECT_JERK_RADPS3`·dt² (and, for the one before, its neighbours'
-        interpolation too): a glitch that `_glitch_value` can only confirm two samples later."""
-        times, speeds = self._wheel_times, self._wheel_speeds
-        n = len(times)
-        if n < 4:
-            return False
-        t0, t1, t2, t3 = times[n - 4], times[n - 3], times[n - 2], times[n - 1]
-        if not t0 < t1 < t2 < t3:
-            return False
-        limit = SUSPECT_JERK_RADPS3 * (t3 - t2) ** 2
-        for y0, y1, y2, y3 in zip(speeds[n - 4], speeds[n - 3], speeds[n - 2], speeds[n - 1]):
-            if abs(y3 - (y2 + (y2 - y1) * (t3 - t2) / (t2 - t1))) > limit:
-                return True
-            trend = y1 + (y1 - y0) * (t2 - t1) / (t1 - t0)
-            between = y1 + (y3 - y1) * (t2 - t1) / (t3 - t1)
-            if abs(y2 - trend) > limit and abs(y2 - between) > limit:
-                return True
-        return False
-
-    def _fit_window(self) -> tuple[float, list[float], list[float], bool]:
-        """Local quadratic fit at the window's centre: (t_c, ω(t_c), dω/dt(t_c), glitch), glitch
-        when one wheel's third-newest sample is a sensor error (`_glitch_value`). Also the ω̇ the
-        brake torques are set against (`_torque_omega_dot`: the same fit over the central
-        `torque_window` samples) and the weights that average the torques as it averages ω̇.
-        """
-        times = self._wheel_times
-        if self.core is not None:
-            fitted = self.core.fit_wheels(times, self._wheel_speeds, self.glitch_threshold, self.torque_window)
-            if fitted is None:
-                self._torque_weights = self._torque_omega_dot = None
-                return self._fit_wheels_numpy()
-            t_c, omega, omega_dot, glitch, self._torque_weights, self._torque_omega_dot = fitted
-            return t_c, omega, omega_dot, glitch
-        n = len(times)
-        t_c = float(times[n // 2])
-        fitted = _quadratic_fit(times, self._wheel_speeds, t_c)
-        if fitted is None:
-            self._torque_weights = self._torque_omega_dot = None
-            return self._fit_wheels_numpy()
-        omega, omega_dot, self._torque_weights = fitted
-        self._torque_omega_dot = omega_dot
-        if self.torque_window < n:
-            lo = (n - self.torque_window) // 2
-            hi = lo + self.torque_window
-            inner = _quadratic_fit(list(times)[lo:hi], list(self._wheel_speeds)[lo:hi], t_c)
-            if inner is not None:
-                _, self._torque_omega_dot, weights = inner
-                self._torque_weights = [0.0] * lo + weights + [0.0] * (n - hi)
-        threshold = self.glitch_threshold
-        glitch = any(_glitch_value(times, y, n - 3, threshold) is not None for y in zip(*self._wheel_speeds))
-        return t_c, omega, omega_dot, glitch
-
-    def _fit_wheels_numpy(self) -> tuple[float, list[float], list[float], bool]:
-        """The same fit by numpy's SVD least squares (for a degenerate spread of timestamps)."""
-        times = np.fromiter(self._wheel_times, dtype=float, count=len(self._wheel_times))
-        speeds = np.array(self._wheel_speeds, dtype=float)
-        centre = len(times) // 2
-        t_c = float(times[centre])
-        tau = times - t_c
-        design = np.empty((len(tau), 3))
-        design[:, 0] = 1.0
-        design[:, 1] = tau
-        design[:, 2] = tau * tau
-        coef, *_ = np.linalg.lstsq(design, speeds, rcond=None)
-        k = len(times) - 3
-        glitch = any(_glitch_value(self._wheel_times, y, k, self.glitch_threshold) is not None
-                     for y in zip(*self._wheel_speeds))
-        return t_c, [float(w) for w in coef[0]], [float(a) for a in coef[1]], glitch
-
     # The wheel's angular acceleration comes from the derivative filter, which averages ω̇ over
     # its window; the torques and the body acceleration it is set against in the wheel and body
-    # equations are averaged by the same kernel (`_matched_weights`). Against point values, a
-    # fast pressure swing (ABS on ice, where most of the brake torque goes into the wheel's
-    # inertia) left the two out of step: μ read 50 % low while the pressure rose, then as much high.
+    # equations are averaged by the same kernel (`wheel_speed_filter._matched_weights`). Against
+    # point values, a fast pressure swing (ABS on ice, where most of the brake torque goes into the
+    # wheel's inertia) left the two out of step: μ read 50 % low while the pressure rose, then as
+    # much high.
     def _matched_brake_torques(self, pressures: list[float]) -> list[float]:
         veh = self.vehicle
         if self._torque_weights is None:
@@ -1217,161 +1006,8 @@ class FrontEnd:
         return (time_s - h.last_arrival_s <= self.options.stale_periods * h.period_s + 1e-3
                 or h.last_arrival_s >= time_s)
 
-    def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float) -> None:
-        # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
-        # (or road grade, which the same correction absorbs).
-        wheel_accel = self.vehicle.wheel_radius * (sum(omega_dot) / len(omega_dot))
-        alpha = min(1.0, self.sample_period_s / max(self.options.accel_bias_time_constant, 1e-3))
-        error = accel_long_raw - wheel_accel
-        if abs(error) < 2.0:
-            # The plain mean of the first samples, then the exponential forgetting: right after
-            # start-up the offset is known after a second of rolling, not only after several τ.
-            self._accel_bias_samples += 1
-            alpha = max(alpha, 1.0 / self._accel_bias_samples)
-            self._accel_bias_mps2 += alpha * (error - self._accel_bias_mps2)
-
-    def _update_brake_gain(
-        self,
-        accel_long: float,
-        speed: float,
-        inertia_torques: list[float],
-        brake_torques: list[float],
-        drive: list[float],
-        wheel_linear: list[float],
-        brake_rates: list[float],
-        braking: bool,
-    ) -> None:
-        """Body equation M dv/dt = −ΣF_x − B v − D v² as an independent check on brake force."""
-        opts = self.options
-        veh = self.vehicle
-        decel = -accel_long
-        raw_brake, raw_rate = sum(brake_torques), sum(brake_rates)
-        total_brake = max(raw_brake + self._lag_state[5] * raw_rate, 0.0)   # (advanced by the lag learnt)
-        brake_rate = (total_brake - self._last_brake_nm) / self.sample_period_s
-        self._last_brake_nm = total_brake
-        # The verdict is on the last ~0.2 s of braking: after as long with no sample judged (brakes
-        # off, the car not yet decelerating, a wheel locked) it has nothing to say, and the next
-        # judged sample starts the window again.
-        self._unjudged_s += self.sample_period_s
-        if self._unjudged_s > _BRAKE_MODEL_WINDOW_S:
-            self._brake_model_holds = True
-            self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = self._recent_lag_nm = 0.0
-        # Only while some wheel is braked: below that the pressures are their sensors' offsets
-        # and the deceleration is drag and the accelerometer's offset (before free rolling has
-        # taught it), and a window of those met the next stop's first samples as a "fault".
-        if not braking or decel < opts.brake_gain_min_decel or total_brake < 1.0 or not math.isfinite(brake_rate):
-            return
-        # Not at walking pace (slip and the wheels' derivatives are ill-conditioned there, and a
-        # car held at rest by its brakes decelerates by nothing), nor with a wheel locked: a
-        # clamped wheel passes the tyre's sliding force, far less than its pressure could.
-        locked = max(0.3, LOCKED_WHEEL_RATIO * speed)
-        if speed < opts.min_speed or min(wheel_linear) < locked:
-            return
-        drag = veh.resistance_force(speed)
-        total_force = veh.mass * decel - drag
-        other = sum(inertia_torques) - sum(drive)
-        # The gain is the mean of each sample's ratio (torque the body equation needs / torque the
-        # pressures give) weighted by the brake torque squared, with exponential forgetting: the
-        # first instants of a stop (a few N·m against a wheel's inertia and a lagging
-        # accelerometer: ratios of 50) do not count like full braking. It converges within a
-        # stop, which matters because the gain also absorbs the car's load (a 25 % heavier car
-        # read 20 % too much μ until learnt); the prior weighs like 10 samples at 1 kN·m.
-        # Each sample's own ratio is clipped to the limits first: one wild sample (spoofed wheel
-        # speeds give inertia torques of kN·m) moves the sums no more than a plausible one.
-        lim = opts.brake_gain_limits
-        needed = total_force * veh.wheel_radius - other
-        ratio = needed / total_brake
-        if not math.isfinite(ratio):
-            return      # a NaN here would stay in the sums for good
-        # The pressures against the body over the last ~0.2 s of braking (sums of torques, so that
-        # the pressure sensors' lag and the wheels' inertia torques through an ABS cycle average
-        # out, and small torques count little): far outside the gain limits, by more than an
-        # accelerometer offset, the pressures' offsets and the sensors' lag explain on top, the
-        # pressures do not say what the brakes do (a signal scaled wrong, a sensor drifting by a
-        # factor). Then no wheel's μ is trusted and the front end reports a fault.
-        # Each sample weighs by its brake torque (the first instants of a stop, a few N·m against
-        # the wheels' inertia and a lagging accelerometer, count little).
-        recent = 1.0 - min(1.0, self.sample_period_s / _BRAKE_MODEL_WINDOW_S)
-        self._unjudged_s = 0.0
-        self._recent_weight_nm = recent * self._recent_weight_nm + total_brake
-        self._recent_needed_nm = recent * self._recent_needed_nm + total_brake * needed
-        self._recent_brake_nm = recent * self._recent_brake_nm + total_brake * total_brake
-        self._recent_lag_nm = recent * self._recent_lag_nm + total_brake * PRESSURE_SENSOR_LAG_S * brake_rate
-        window_ratio = self._recent_needed_nm / self._recent_brake_nm
-        accel_tolerance = BODY_ACCEL_TOLERANCE_MPS2 + (
-            UNLEARNT_ACCEL_TOLERANCE_MPS2 if self._accel_bias_samples < ACCEL_BIAS_LEARNT_SAMPLES else 0.0)
-        tolerance = veh.mass * veh.wheel_radius * accel_tolerance + PRESSURE_TOLERANCE_BAR * sum(self._brake_gains)
-        resolved = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
-                                       self._recent_weight_nm, 1.0, 1.0) > tolerance
-        beyond_gains = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
-                                           self._recent_weight_nm, (1.0 - lim) / _BRAKE_MODEL_MARGIN,
-                                           (1.0 + lim) * _BRAKE_MODEL_MARGIN) > tolerance
-        # With one master pressure for all wheels, brakes giving less than it says beyond what the
-        # gain correction explains are an ABS releasing wheels, not a wrong signal: no gain is
-        # learnt then, and no wheel's brake torque is known (`_brake_released`). Judged on this
-        # sample too, not only over the window: the first dump's samples, read with the master's
-        # torque, would put a peak far above the road's into the fit.
-        released = self.pressures_are_master and (
-            (window_ratio < 1.0 - lim and resolved) or (ratio < 1.0 - lim and total_brake - needed > tolerance))
-        # Once an ABS has released wheels in a stop it modulates them until the stop ends: from
-        # then on the master pressure bounds the wheels' pressures and says nothing more.
-        self._brake_released = released = released or self._brake_released
-        self._brake_model_holds = released or not beyond_gains
-        if not released:
-            if opts.pressure_lag_compensation:
-                self._learn_pressure_lag(raw_brake, raw_rate, needed)
-            ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
-            keep = 1.0 - min(1.0, self.sample_period_s / max(opts.brake_gain_time_constant, 1e-3))
-            weight = total_brake * total_brake
-            self._gain_sum_tt = keep * self._gain_sum_tt + weight
-            self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
-            self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
-
-    def _brake_torque_rates(self, time_s: float, torques: list[float]) -> list[float]:
-        """Each wheel's matched brake torque's rate since the last sample (0 after a gap, and
-        where either torque is not finite: one bad sample must not spoil the next one's torque)."""
-        state = self._lag_state
-        dt = time_s - state[6]            # (NaN before the first sample: no rate)
-        self._lag_state = state[:6] + (time_s, *torques)
-        if not 0.0 < dt <= self.options.max_gap:
-            return [0.0, 0.0, 0.0, 0.0]
-        rates = [(b - b0) / dt for b, b0 in zip(torques, state[7:])]
-        return [r if math.isfinite(r) else 0.0 for r in rates]
-
-    def _learn_pressure_lag(self, brake: float, rate: float, needed: float) -> None:
-        """The pressure sensors' lag τ from the body equation: the brakes' torque the body needs,
-        N = ΣR·F_x − ΣJ·ω̇, is k·(B + τ·Ḃ) at every instant, B the torque the pressures say; a
-        least-squares fit of N on B and Ḃ gives k and k·τ (each sample as it comes, with forgetting,
-        and a prior of no lag). The wheels' torque balance sees the same lag: under ABS it read μ
-        30 % high while the pressure fell and 25 % low while it rose (the peak read high)."""
-        s_bb, s_bd, s_dd, s_bn, s_dn, lag = self._lag_state[:6]
-        keep = 1.0 - min(1.0, self.sample_period_s / PRESSURE_LAG_TIME_CONSTANT_S)
-        s_bb = keep * s_bb + brake * brake
-        s_bd = keep * s_bd + brake * rate
-        s_dd = keep * s_dd + rate * rate
-        s_bn = keep * s_bn + brake * needed
-        s_dn = keep * s_dn + rate * needed
-        if not all(map(math.isfinite, (s_bb, s_bd, s_dd, s_bn, s_dn))):
-            return      # a NaN here would stay in the sums for good
-        dd = s_dd + _PRESSURE_LAG_PRIOR
-        det = s_bb * dd - s_bd * s_bd
-        if det > 0.0:
-            k = (s_bn * dd - s_bd * s_dn) / det
-            k_lag = (s_bb * s_dn - s_bd * s_bn) / det
-            # (a gain k far from 1 is a body equation that does not hold: no lag from it)
-            if 0.5 < k < 2.0:
-                lag = min(max(k_lag / k, 0.0), MAX_PRESSURE_LAG_S)
-                lag = lag if lag >= MIN_PRESSURE_LAG_S else 0.0
-        self._lag_state = (s_bb, s_bd, s_dd, s_bn, s_dn, lag) + self._lag_state[6:]
-
-
 # Rejections of a trigger frame that give no output at all (its time is not the bus's).
 _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
-# What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
-# must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
-_LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
-                 "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
-                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state")
 # The fault a required input's persistently rejected frames give, by kind of rejection.
 _REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
                      "clock step": "clock step"}
@@ -1394,56 +1030,9 @@ _PHYSICS_TYPES = (PhysicalSample, FrontEndResult, "acceleration out of range", "
                   "brake pressure disagrees with deceleration")
 
 
-def _unexplained_torque(needed: float, brake: float, lag: float, weight: float, low: float, high: float) -> float:
-    """How far the torque the body needs lies outside what the pressures give times a gain in
-    [`low`, `high`], beyond what the pressure sensors' lag explains (N·m; 0 inside the band).
-
-    The arguments are the brake-weighted window sums: Σb·N, Σb·b, Σb·lag·ḃ and Σb. A sensor
-    trailing the brakes reads low while they apply and high while they release: a lag of up to
-    `PRESSURE_SENSOR_LAG_S` explains a disagreement of that sign, up to that size. The gain band
-    and the lag are one allowance, not two tests: a car whose brakes are 18 % stronger than
-    configured, seen through a lagging sensor as the pedal goes down, is within both together.
-    (`_frontcore.c`'s `unexplained_torque` is the same.)
-    """
-    mean_needed, mean_brake, lag_explains = needed / weight, brake / weight, lag / weight
-    if mean_needed > high * mean_brake:
-        return mean_needed - high * mean_brake - max(lag_explains, 0.0)
-    if mean_needed < low * mean_brake:
-        return low * mean_brake - mean_needed - max(-lag_explains, 0.0)
-    return 0.0
-
-
 def _second_fastest(speeds: list[float]) -> float:
     """The second-largest of the wheels' speeds (`_frontcore.c`'s `second_of`)."""
     return sorted(speeds)[-2]
-
-
-def _glitch_value(times: Any, y: Any, k: int, threshold: float) -> float | None:
-    """What sample `k` of one wheel's speeds `y` should read if it is a sensor glitch, else None.
-
-    A glitch is one sample that disagrees, the same way and by more than `threshold`, with its
-    neighbours' interpolation and with each side's own trend (the line through the two samples
-    before it, and the two after it). A wheel cannot do that: it would need its acceleration to
-    jump and jump back within a sample. A wheel running deep into slip and recovering (an ABS
-    dumping late: 30-50 rad/s lost in 50 ms) turns around at the bottom, but each side of the
-    turn follows its own trend, so it is no glitch; a jump too fast for the torques on the wheel
-    never gets here (`plausibility.InputGate` rejects the frame).
-    (`_frontcore.c`'s `glitch_value` is the same, line by line.)
-    """
-    if k < 2 or k + 2 >= len(y):
-        return None
-    t0, t1, t2, t3, t4 = times[k - 2], times[k - 1], times[k], times[k + 1], times[k + 2]
-    if not t0 < t1 < t2 < t3 < t4:
-        return None
-    y0, y1, y2, y3, y4 = y[k - 2], y[k - 1], y[k], y[k + 1], y[k + 2]
-    between = y1 + (y3 - y1) * (t2 - t1) / (t3 - t1)
-    left = y1 + (y1 - y0) * (t2 - t1) / (t1 - t0)
-    right = y3 - (y4 - y3) * (t3 - t2) / (t4 - t3)
-    da, db, dc = y2 - between, y2 - left, y2 - right
-    if (da > threshold and db > threshold and dc > threshold) or (da < -threshold and db < -threshold
-                                                                   and dc < -threshold):
-        return between
-    return None
 
 
 def _interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:
@@ -1467,65 +1056,6 @@ def _interpolation_plan(ts: list[float], times: list[float], weights: list[float
         coefficients[k - 1] = get(k - 1, 0.0) + w * (1.0 - f)
         coefficients[k] = get(k, 0.0) + w * f
     return list(coefficients.items())
-
-
-def _quadratic_fit(times: Any, rows: Any, t_c: float) -> tuple[list[float], list[float], list[float]] | None:
-    """ω(t_c) and dω/dt(t_c) of each wheel by a local quadratic through `rows` (one 4-tuple of
-    wheel speeds per time), and the weights that average a torque as it averages ω̇
-    (`_matched_weights`); None for timestamps too degenerate for the closed form.
-
-    Least squares in closed form on plain floats (the normal equations of a 3-parameter fit in the
-    time offset scaled to [−1, 1], so they stay well conditioned): a handful of points and four
-    wheels are far too small for numpy's per-call overhead. (`_frontcore.c`'s `quadratic_fit`.)
-    """
-    n = len(times)
-    tau = [t - t_c for t in times]
-    h = max(abs(tau[0]), abs(tau[-1])) or 1.0
-    u = [x / h for x in tau]
-    u2 = [x * x for x in u]
-    # sum(map(mul, ...)): the same products summed in the same order as a generator of
-    # a * b, without a Python frame per term.
-    s1 = sum(u)
-    s2 = sum(u2)
-    s3 = sum(map(mul, u, u2))
-    s4 = sum(map(mul, u2, u2))
-    # Symmetric 3×3 normal matrix [[n, s1, s2], [s1, s2, s3], [s2, s3, s4]]: its adjugate.
-    c00 = s2 * s4 - s3 * s3
-    c01 = s2 * s3 - s1 * s4
-    c02 = s1 * s3 - s2 * s2
-    c11 = n * s4 - s2 * s2
-    c12 = s1 * s2 - n * s3
-    det = n * c00 + s1 * c01 + s2 * c02
-    if not det > 1e-9 * max(n * s2 * s4, 1e-300):
-        return None
-    inv = 1.0 / det
-    omega = []
-    omega_dot = []
-    for y in zip(*rows):   # each wheel's speeds over the window
-        b0 = sum(y)
-        b1 = sum(map(mul, u, y))
-        b2 = sum(map(mul, u2, y))
-        omega.append((c00 * b0 + c01 * b1 + c02 * b2) * inv)
-        omega_dot.append((c01 * b0 + c11 * b1 + c12 * b2) * inv / h)
-    return omega, omega_dot, _matched_weights(times, u, (c01 * inv / h, c11 * inv / h, c12 * inv / h))
-
-
-def _matched_weights(times, u, coef) -> list[float]:
-    """Weights w_k such that Σ w_k·T(t_k) is T averaged as the derivative filter averages ω̇.
-
-    The filter's derivative is Σ c_k·ω(t_k) with c_k = coef₀ + coef₁·u_k + coef₂·u_k² and Σ c_k = 0;
-    summed by parts it is Σ_j S_j·(ω(t_j) − ω(t_{j−1})) with S_j = Σ_{k≥j} c_k, i.e. the mean
-    of ω̇ over each interval weighted by S_j·Δt_j (the weights sum to 1). Each interval's mean
-    of T is taken by the trapezoid rule.
-    """
-    c = [coef[0] + coef[1] * a + coef[2] * a * a for a in u]
-    n = len(c)
-    tail = 0.0
-    interval = [0.0] * (n + 1)
-    for j in range(n - 1, 0, -1):
-        tail += c[j]
-        interval[j] = tail * (times[j] - times[j - 1])
-    return [0.5 * (interval[k] + interval[k + 1]) for k in range(n)]
 
 
 def make_front_end(

@@ -1,0 +1,271 @@
+"""The body equation as the front end's check on its own brake inputs.
+
+M·dv/dt = −ΣF_x − B·v − D·v² (model.md) says what torque the brakes gave in total; set against the
+torque the pressures say, it gives a brake-gain correction (pads move ±20 % in service, and the
+gain absorbs the car's load), the pressure sensors' lag, and a verdict: the pressures do not say
+what the brakes do (a fault), or, on a car sending one master-cylinder pressure, an ABS has released
+wheels (no wheel's brake torque is known from then on). While the car rolls free the same balance
+gives the accelerometer's offset. `BodyEquation` is a part of `frontend.FrontEnd`: its state lives
+on the front end, where the compiled `_frontcore.sample_physics` reads and writes it by these
+names; the code here is the fallback without a C compiler and the reference (tests compare).
+"""
+from __future__ import annotations
+
+import math
+
+_BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
+_BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
+_BRAKE_MODEL_WINDOW_S = 0.2                 # the body check's window: about this much braking
+# A wheel slower than this share of the car's speed (and 0.3 m/s) is locked: its brake clamps it
+# and passes only the tyre's sliding force, not the torque its pressure could give.
+LOCKED_WHEEL_RATIO = 0.05      # (also in _frontcore.c)
+# What the body equation cannot resolve, as a torque: an accelerometer offset and the road's grade
+# (this much of a deceleration) and each wheel's pressure offset (bar, times its gain). A smaller
+# disagreement proves no signal wrong, however large its ratio (ice, where the brake torques are
+# of the order of the wheels' inertia torques). (Also in _frontcore.c.)
+BODY_ACCEL_TOLERANCE_MPS2 = 0.05
+PRESSURE_TOLERANCE_BAR = 0.25
+# ... and until free rolling has taught the accelerometer's offset (this many samples), the
+# offset a sensor may have (a fault seen right after start-up would be the accelerometer's).
+UNLEARNT_ACCEL_TOLERANCE_MPS2 = 0.3
+ACCEL_BIAS_LEARNT_SAMPLES = 50
+# ... and while the brakes' torque moves, what a pressure sensor trailing it by this long misses
+# (a pedal applied at 1,500 bar/s, an ABS dump: tens of bar).
+PRESSURE_SENSOR_LAG_S = 0.04
+# The pressure sensors' own lag, identified from the body equation (`_learn_pressure_lag`), is
+# taken as at most this (a first-order lag of a few tens of ms; more would be a broken sensor),
+# learnt over about this much braking, with a prior of "no lag" weighing like ten samples of a
+# pressure moving 10 kN·m/s. (Also in _frontcore.c.)
+MAX_PRESSURE_LAG_S = 0.05
+# ... and below this, not told from none: a lag-free sensor's fit wanders by up to ~1 ms (the
+# body equation's noise, the torques' rates being finite differences), and advancing the torques
+# by that only adds noise.
+MIN_PRESSURE_LAG_S = 0.002
+PRESSURE_LAG_TIME_CONSTANT_S = 5.0
+_PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
+# What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
+# must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
+LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
+                 "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
+                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state")
+
+
+class BodyEquation:
+    """Brake gain, pressure lag, accelerometer offset and the brake model's verdict, learnt from
+    the body equation sample by sample (`_update_brake_gain`, `_learn_accel_bias`)."""
+
+    def _reset_body_equation(self) -> None:
+        """What the body equation has learnt: nothing yet."""
+        self._accel_bias_mps2 = 0.0
+        self._accel_bias_samples = 0
+        self._brake_gain_factor = 1.0
+        self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
+        # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...
+        self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
+        self._recent_lag_nm = 0.0          # ... Σ T × what the pressure sensors' lag may hide (signed)
+        self._last_brake_nm = 0.0
+        self._brake_released = False       # one master pressure overstating the brakes: an ABS at work
+        self._brake_model_holds = True
+        self._unjudged_s = 0.0             # time since a sample last entered that window
+        # The pressure-lag regression (`_learn_pressure_lag`): Σ B², Σ B·Ḃ, Σ Ḃ², Σ B·N, Σ Ḃ·N, the
+        # lag it gives, then the time and the four matched brake torques of the last sample (their
+        # rates). One tuple, replaced whole, so that a suspect sample's state is put back as is.
+        self._lag_state: tuple[float, ...] = (0.0,) * 6 + (math.nan, 0.0, 0.0, 0.0, 0.0)
+
+    @property
+    def brake_gain_factor(self) -> float:
+        return self._brake_gain_factor
+
+    @property
+    def wheel_torques_unknown(self) -> bool:
+        """Whether no wheel's brake torque is known: the car sends one master-cylinder pressure
+        for all wheels, and an ABS has released wheels in this stop (`_brake_released`)."""
+        return self.pressures_are_master and self._brake_released
+
+    @property
+    def accel_bias_mps2(self) -> float:
+        return self._accel_bias_mps2
+
+    @property
+    def pressure_lag_s(self) -> float:
+        """The pressure sensors' lag behind the brakes, as learnt from the body equation."""
+        return self._lag_state[5]
+
+    def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float) -> None:
+        # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
+        # (or road grade, which the same correction absorbs).
+        wheel_accel = self.vehicle.wheel_radius * (sum(omega_dot) / len(omega_dot))
+        alpha = min(1.0, self.sample_period_s / max(self.options.accel_bias_time_constant, 1e-3))
+        error = accel_long_raw - wheel_accel
+        if abs(error) < 2.0:
+            # The plain mean of the first samples, then the exponential forgetting: right after
+            # start-up the offset is known after a second of rolling, not only after several τ.
+            self._accel_bias_samples += 1
+            alpha = max(alpha, 1.0 / self._accel_bias_samples)
+            self._accel_bias_mps2 += alpha * (error - self._accel_bias_mps2)
+
+    def _update_brake_gain(
+        self,
+        accel_long: float,
+        speed: float,
+        inertia_torques: list[float],
+        brake_torques: list[float],
+        drive: list[float],
+        wheel_linear: list[float],
+        brake_rates: list[float],
+        braking: bool,
+    ) -> None:
+        """Body equation M dv/dt = −ΣF_x − B v − D v² as an independent check on brake force."""
+        opts = self.options
+        veh = self.vehicle
+        decel = -accel_long
+        raw_brake, raw_rate = sum(brake_torques), sum(brake_rates)
+        total_brake = max(raw_brake + self._lag_state[5] * raw_rate, 0.0)   # (advanced by the lag learnt)
+        brake_rate = (total_brake - self._last_brake_nm) / self.sample_period_s
+        self._last_brake_nm = total_brake
+        # The verdict is on the last ~0.2 s of braking: after as long with no sample judged (brakes
+        # off, the car not yet decelerating, a wheel locked) it has nothing to say, and the next
+        # judged sample starts the window again.
+        self._unjudged_s += self.sample_period_s
+        if self._unjudged_s > _BRAKE_MODEL_WINDOW_S:
+            self._brake_model_holds = True
+            self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = self._recent_lag_nm = 0.0
+        # Only while some wheel is braked: below that the pressures are their sensors' offsets
+        # and the deceleration is drag and the accelerometer's offset (before free rolling has
+        # taught it), and a window of those met the next stop's first samples as a "fault".
+        if not braking or decel < opts.brake_gain_min_decel or total_brake < 1.0 or not math.isfinite(brake_rate):
+            return
+        # Not at walking pace (slip and the wheels' derivatives are ill-conditioned there, and a
+        # car held at rest by its brakes decelerates by nothing), nor with a wheel locked: a
+        # clamped wheel passes the tyre's sliding force, far less than its pressure could.
+        locked = max(0.3, LOCKED_WHEEL_RATIO * speed)
+        if speed < opts.min_speed or min(wheel_linear) < locked:
+            return
+        drag = veh.resistance_force(speed)
+        total_force = veh.mass * decel - drag
+        other = sum(inertia_torques) - sum(drive)
+        needed = total_force * veh.wheel_radius - other
+        ratio = needed / total_brake
+        if not math.isfinite(ratio):
+            return      # a NaN here would stay in the sums for good
+        if not self._judge_brake_model(total_brake, brake_rate, needed, ratio):
+            if opts.pressure_lag_compensation:
+                self._learn_pressure_lag(raw_brake, raw_rate, needed)
+            self._learn_brake_gain(total_brake, ratio)
+
+    def _judge_brake_model(self, total_brake: float, brake_rate: float, needed: float, ratio: float) -> bool:
+        """Whether the pressures still say what the brakes do (`_brake_model_holds`), and whether an
+        ABS has released wheels behind a master-cylinder pressure in this stop: returned, as then
+        neither the gain nor the lag is learnt from the sample. `needed` is the brakes' torque the
+        body needs, `ratio` it over `total_brake`, the torque the pressures give."""
+        veh = self.vehicle
+        lim = self.options.brake_gain_limits
+        # The pressures against the body over the last ~0.2 s of braking (sums of torques, so that
+        # the pressure sensors' lag and the wheels' inertia torques through an ABS cycle average
+        # out, and small torques count little): far outside the gain limits, by more than an
+        # accelerometer offset, the pressures' offsets and the sensors' lag explain on top, the
+        # pressures do not say what the brakes do (a signal scaled wrong, a sensor drifting by a
+        # factor). Then no wheel's μ is trusted and the front end reports a fault.
+        # Each sample weighs by its brake torque (the first instants of a stop, a few N·m against
+        # the wheels' inertia and a lagging accelerometer, count little).
+        recent = 1.0 - min(1.0, self.sample_period_s / _BRAKE_MODEL_WINDOW_S)
+        self._unjudged_s = 0.0
+        self._recent_weight_nm = recent * self._recent_weight_nm + total_brake
+        self._recent_needed_nm = recent * self._recent_needed_nm + total_brake * needed
+        self._recent_brake_nm = recent * self._recent_brake_nm + total_brake * total_brake
+        self._recent_lag_nm = recent * self._recent_lag_nm + total_brake * PRESSURE_SENSOR_LAG_S * brake_rate
+        window_ratio = self._recent_needed_nm / self._recent_brake_nm
+        accel_tolerance = BODY_ACCEL_TOLERANCE_MPS2 + (
+            UNLEARNT_ACCEL_TOLERANCE_MPS2 if self._accel_bias_samples < ACCEL_BIAS_LEARNT_SAMPLES else 0.0)
+        tolerance = veh.mass * veh.wheel_radius * accel_tolerance + PRESSURE_TOLERANCE_BAR * sum(self._brake_gains)
+        resolved = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
+                                       self._recent_weight_nm, 1.0, 1.0) > tolerance
+        beyond_gains = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
+                                           self._recent_weight_nm, (1.0 - lim) / _BRAKE_MODEL_MARGIN,
+                                           (1.0 + lim) * _BRAKE_MODEL_MARGIN) > tolerance
+        # With one master pressure for all wheels, brakes giving less than it says beyond what the
+        # gain correction explains are an ABS releasing wheels, not a wrong signal: no gain is
+        # learnt then, and no wheel's brake torque is known (`_brake_released`). Judged on this
+        # sample too, not only over the window: the first dump's samples, read with the master's
+        # torque, would put a peak far above the road's into the fit.
+        released = self.pressures_are_master and (
+            (window_ratio < 1.0 - lim and resolved) or (ratio < 1.0 - lim and total_brake - needed > tolerance))
+        # Once an ABS has released wheels in a stop it modulates them until the stop ends: from
+        # then on the master pressure bounds the wheels' pressures and says nothing more.
+        self._brake_released = released = released or self._brake_released
+        self._brake_model_holds = released or not beyond_gains
+        return released
+
+    def _learn_brake_gain(self, total_brake: float, ratio: float) -> None:
+        """The gain is the mean of each sample's ratio (torque the body equation needs / torque the
+        pressures give) weighted by the brake torque squared, with exponential forgetting: the
+        first instants of a stop (a few N·m against a wheel's inertia and a lagging
+        accelerometer: ratios of 50) do not count like full braking. It converges within a
+        stop, which matters because the gain also absorbs the car's load (a 25 % heavier car
+        read 20 % too much μ until learnt); the prior weighs like 10 samples at 1 kN·m.
+        Each sample's own ratio is clipped to the limits first: one wild sample (spoofed wheel
+        speeds give inertia torques of kN·m) moves the sums no more than a plausible one."""
+        opts = self.options
+        lim = opts.brake_gain_limits
+        ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
+        keep = 1.0 - min(1.0, self.sample_period_s / max(opts.brake_gain_time_constant, 1e-3))
+        weight = total_brake * total_brake
+        self._gain_sum_tt = keep * self._gain_sum_tt + weight
+        self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
+        self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
+
+    def _brake_torque_rates(self, time_s: float, torques: list[float]) -> list[float]:
+        """Each wheel's matched brake torque's rate since the last sample (0 after a gap, and
+        where either torque is not finite: one bad sample must not spoil the next one's torque)."""
+        state = self._lag_state
+        dt = time_s - state[6]            # (NaN before the first sample: no rate)
+        self._lag_state = state[:6] + (time_s, *torques)
+        if not 0.0 < dt <= self.options.max_gap:
+            return [0.0, 0.0, 0.0, 0.0]
+        rates = [(b - b0) / dt for b, b0 in zip(torques, state[7:])]
+        return [r if math.isfinite(r) else 0.0 for r in rates]
+
+    def _learn_pressure_lag(self, brake: float, rate: float, needed: float) -> None:
+        """The pressure sensors' lag τ from the body equation: the brakes' torque the body needs,
+        N = ΣR·F_x − ΣJ·ω̇, is k·(B + τ·Ḃ) at every instant, B the torque the pressures say; a
+        least-squares fit of N on B and Ḃ gives k and k·τ (each sample as it comes, with forgetting,
+        and a prior of no lag). The wheels' torque balance sees the same lag: under ABS it read μ
+        30 % high while the pressure fell and 25 % low while it rose (the peak read high)."""
+        s_bb, s_bd, s_dd, s_bn, s_dn, lag = self._lag_state[:6]
+        keep = 1.0 - min(1.0, self.sample_period_s / PRESSURE_LAG_TIME_CONSTANT_S)
+        s_bb = keep * s_bb + brake * brake
+        s_bd = keep * s_bd + brake * rate
+        s_dd = keep * s_dd + rate * rate
+        s_bn = keep * s_bn + brake * needed
+        s_dn = keep * s_dn + rate * needed
+        if not all(map(math.isfinite, (s_bb, s_bd, s_dd, s_bn, s_dn))):
+            return      # a NaN here would stay in the sums for good
+        dd = s_dd + _PRESSURE_LAG_PRIOR
+        det = s_bb * dd - s_bd * s_bd
+        if det > 0.0:
+            k = (s_bn * dd - s_bd * s_dn) / det
+            k_lag = (s_bb * s_dn - s_bd * s_bn) / det
+            # (a gain k far from 1 is a body equation that does not hold: no lag from it)
+            if 0.5 < k < 2.0:
+                lag = min(max(k_lag / k, 0.0), MAX_PRESSURE_LAG_S)
+                lag = lag if lag >= MIN_PRESSURE_LAG_S else 0.0
+        self._lag_state = (s_bb, s_bd, s_dd, s_bn, s_dn, lag) + self._lag_state[6:]
+
+
+def _unexplained_torque(needed: float, brake: float, lag: float, weight: float, low: float, high: float) -> float:
+    """How far the torque the body needs lies outside what the pressures give times a gain in
+    [`low`, `high`], beyond what the pressure sensors' lag explains (N·m; 0 inside the band).
+
+    The arguments are the brake-weighted window sums: Σb·N, Σb·b, Σb·lag·ḃ and Σb. A sensor
+    trailing the brakes reads low while they apply and high while they release: a lag of up to
+    `PRESSURE_SENSOR_LAG_S` explains a disagreement of that sign, up to that size. The gain band
+    and the lag are one allowance, not two tests: a car whose brakes are 18 % stronger than
+    configured, seen through a lagging sensor as the pedal goes down, is within both together.
+    (`_frontcore.c`'s `unexplained_torque` is the same.)
+    """
+    mean_needed, mean_brake, lag_explains = needed / weight, brake / weight, lag / weight
+    if mean_needed > high * mean_brake:
+        return mean_needed - high * mean_brake - max(lag_explains, 0.0)
+    if mean_needed < low * mean_brake:
+        return low * mean_brake - mean_needed - max(-lag_explains, 0.0)
+    return 0.0

@@ -317,7 +317,7 @@ def test_compiled_wheel_stats_match_numpy(m, lag):
 
 @pytest.mark.skipif(core is None, reason="no compiled fit (test_the_compiled_fit_is_built fails instead)")
 def test_compiled_peak_report_matches_numpy():
-    from frictiond.estimator import _peak_report_numpy
+    from frictiond.estimate_report import _peak_report_numpy
 
     rng = np.random.default_rng(5)
     capped_seen = {False: 0, True: 0}

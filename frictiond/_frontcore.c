@@ -758,7 +758,7 @@ static int ref_plausible(FEState *s, const double *k, double ref, double fastest
 }
 
 /* FrontEnd._update_speed; `ref_fresh` is `_ref_fresh(time_s)` (the reference is None when absent). */
-/* frontend._second_fastest: the second-largest of the four wheels' speeds */
+/* speed_estimate._second_fastest: the second-largest of the four wheels' speeds */
 static double second_of(const double *wl)
 {
     double first = -INFINITY, second = -INFINITY;

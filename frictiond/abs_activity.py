@@ -28,9 +28,6 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-ABS_FLAG_NAMES = ("abs_active", "abs_active_fl", "abs_active_fr", "abs_active_rl", "abs_active_rr")
-MASTER_PRESSURE_NAME = "brake_pressure_master"
-
 NO_ACTIVITY = (False, False, False, False)
 
 

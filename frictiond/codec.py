@@ -17,7 +17,7 @@ from cantools.database import Database
 from .config import ConfigError, SignalSource
 from .e2e import E2EChecker, protect
 from .frames import Frame
-from .frontend import OPTIONAL_INPUTS, REQUIRED_INPUTS
+from .input_names import OPTIONAL_INPUTS, REQUIRED_INPUTS
 from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
 
 try:

@@ -20,7 +20,8 @@ import yaml
 
 from .baseline_rls import BurckhardtRLSOptions
 from .estimator import LugreTROptions
-from .frontend import OPTIONAL_INPUTS, REQUIRED_INPUTS, FrontEndOptions
+from .frontend import FrontEndOptions
+from .input_names import OPTIONAL_INPUTS, REQUIRED_INPUTS
 from .vehicle import VehicleParams
 
 ESTIMATOR_KINDS = ("lugre-tr", "burckhardt-rls")

@@ -5,16 +5,20 @@ Per wheel-speed (trigger) frame the front end
 1. keeps the last few wheel-speed samples and fits a local quadratic in time through them
    (a Savitzky–Golay filter that uses the real timestamps, so jitter and dropped frames do not
    bias the derivative); the derivative is taken at the centre of the window, so every other
-   signal is evaluated at that same, delayed instant and all carry the same delay;
+   signal is evaluated at that same, delayed instant and all carry the same delay
+   (`wheel_speed_filter`);
 2. interpolates the other messages (accelerations, pressures, reference speed, drive torque),
    which arrive with their own phase, at that instant;
 3. estimates the vehicle speed (reference sensor when present and fresh, otherwise an
-   accelerometer-driven observer corrected by the wheels), the accelerometer offset and a
-   brake-gain correction from the body equation (pads move ±20 % in service; `body_equation`);
+   accelerometer-driven observer corrected by the wheels: `speed_estimate`), the accelerometer
+   offset and a brake-gain correction from the body equation (pads move ±20 % in service:
+   `body_equation`);
 4. computes normal loads (model.md, physics signs), tyre forces from the wheel equation,
-   utilised friction and slip, and gates each wheel's sample.
+   utilised friction and slip, and gates each wheel's sample; a sample whose inputs are in
+   doubt is not fitted (`doubtful_inputs`).
 
-Pure numerics: it knows canonical signal names, not CAN.
+Those modules hold parts of `FrontEnd`; this one holds the histories, the sample's physics and
+the faults. Pure numerics: it knows canonical signal names (`input_names`), not CAN.
 """
 from __future__ import annotations
 
@@ -32,38 +36,27 @@ try:
 except ImportError:  # pragma: no cover - depends on the install
     compiled_front = None
 
-from .abs_activity import ABS_FLAG_NAMES, MASTER_PRESSURE_NAME, AbsActivity
+from .abs_activity import AbsActivity
 from .body_equation import LEARNT_STATE, BodyEquation
+from .doubtful_inputs import DoubtfulInputs
+from .input_names import (ABS_FLAG_NAMES, DRIVE_TORQUE_NAMES, MASTER_PRESSURE_NAME, PRESSURE_NAMES, REQUIRED_INPUTS,
+                          WHEEL_SPEED_NAMES)
 from .plausibility import InputGate
 from .samples import PhysicalSample
+from .speed_estimate import MAX_ABS_ACCEL_MPS2, SpeedEstimate
 from .vehicle import GRAVITY_MPS2, VehicleParams
 from .wheel_speed_filter import SUSPECT_JERK_RADPS3, WheelSpeedFilter
 
-WHEEL_SPEED_NAMES = ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr")
 _FL, _FR, _RL, _RR = WHEEL_SPEED_NAMES
-PRESSURE_NAMES = ("brake_pressure_fl", "brake_pressure_fr", "brake_pressure_rl", "brake_pressure_rr")
-DRIVE_TORQUE_NAMES = ("drive_torque_fl", "drive_torque_fr", "drive_torque_rl", "drive_torque_rr")
-REQUIRED_INPUTS = WHEEL_SPEED_NAMES + ("accel_long", "accel_lat") + PRESSURE_NAMES
-OPTIONAL_INPUTS = ("yaw_rate", "vehicle_speed_ref") + DRIVE_TORQUE_NAMES + (MASTER_PRESSURE_NAME,) + ABS_FLAG_NAMES
 
 # Plausibility limits of physical inputs; beyond them a sensor is broken, not the road special.
 MAX_WHEEL_SPEED_RADPS = 400.0
-MAX_ABS_ACCEL_MPS2 = 30.0
 FREE_ROLLING_SPREAD = 0.04     # relative wheel-speed spread a curve can explain without any slip
-# A braked wheel turns no faster than the car moves, but for: its tyre's rolling radius against
-# the configured one (this share of the speed), the wheel speeds' noise and the speed estimate's
-# error (this much), and a curve's outer track (half the track times the yaw rate, |a_y|/v).
-WHEEL_RADIUS_SPREAD = 0.01
-WHEEL_SPEED_NOISE_MPS = 0.15
-# Braking harder than this, a wheel speed sender is told from another by the car's speed
-# (`FrontEnd._wheel_senders_told_apart`): wheels drive no car that decelerates.
-MIN_TELLING_DECEL_MPS2 = 1.0
 PRESSURE_ZERO_READINGS = 128   # free-rolling readings a pressure sensor's zero point is the median of
 PRESSURE_ZERO_AT_ZERO = 0.4    # ... and the share of them at 0 that says its zero point is 0
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
 MAX_PRESSURE_BAR = 350.0
 MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
-MAX_SPEED_MPS = 120.0
 BODY_WHEELS_TOLERANCE = 0.25   # the body's and the wheels' total force agree within this (pad friction ±20 %)
 
 
@@ -195,7 +188,7 @@ class _MessageHistory:
         return values[0]
 
 
-class FrontEnd(WheelSpeedFilter, BodyEquation):
+class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
     """Turns decoded inputs into `PhysicalSample`s, one per trigger (wheel-speed) message."""
 
     def __init__(
@@ -416,41 +409,6 @@ class FrontEnd(WheelSpeedFilter, BodyEquation):
             return None
         return self._on_trigger(time_s, history)
 
-    def _take_back(self, message: str, time_s: float) -> None:
-        """A frame already pushed that the gate has since found to be a second node's (`revoked`):
-        out of the message's histories, and out of the wheel-speed window, so that no later
-        sample's derivative or interpolation includes it. (A sample made from it alone is gone.)"""
-        history = self._history.get(message)
-        if history is None or time_s != time_s:
-            return
-        merged = history.merged
-        for name, (times, values) in history.series.items():
-            if times and times[-1] == time_s:
-                times.pop()
-                values.pop()
-                if values:
-                    merged[name] = values[-1]
-        if message == self.trigger_message and self._wheel_times and self._wheel_times[-1] == time_s:
-            self._wheel_times.pop()
-            self._wheel_speeds.pop()
-            self._last_trigger_s = self._wheel_times[-1] if self._wheel_times else -math.inf
-            before = self._before_sample
-            if before is not None and before[0] == time_s:
-                # Its sample taught the speed observer and the learnt state: back as they were
-                # (the next sample has the same window centre: the observer would restart at
-                # the fastest wheel, every slip zero for the rest of the stop).
-                _, self._speed_estimate_mps, self._speed_time_s, self._last_sample_time_s, learnt = before
-                for name, value in zip(LEARNT_STATE, learnt):
-                    setattr(self, name, value)
-
-    def _persistent_fault(self) -> str | None:
-        """A fault naming the required message whose frames keep being rejected, if any."""
-        for message, kind in self.gate.faulty_messages():
-            label = self._fault_names.get(message)
-            if label is not None:
-                return f"{label} {_REJECTION_FAULTS.get(kind, 'implausible')}"
-        return None
-
     def _on_trigger(self, time_s: float, history: _MessageHistory) -> FrontEndResult:
         opts = self.options
         stale = self.stale_messages(time_s)
@@ -516,34 +474,6 @@ class FrontEnd(WheelSpeedFilter, BodyEquation):
             result.sample.input_suspect_share = self.gate.suspect_share()
         return result
 
-    def _input_lost(self, now_s: float) -> bool:
-        """Whether a required message's next frame is overdue (lost, or rejected by the gate):
-        the sample's inputs are averaged over the derivative window, which reaches to now, and
-        past the message's last frame its value would be the last one held, not what the brakes
-        or the body did then (a pressure under ABS moves by tens of bar in a cycle)."""
-        trigger = self.trigger_message
-        for m, h in self._required_histories:
-            if m != trigger and now_s - h.last_arrival_s > 1.25 * h.period_s:
-                return True
-        return False
-
-    def _suspect_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
-        """`_compute_sample` for a suspect sample: a wheel's newest samples are off its own trend
-        by more than a wheel's acceleration can change (maybe a glitch not yet confirmed: that
-        takes two more samples; its weight in the derivative is largest now), a second node
-        sends one of the inputs, or an input's frame for the sample's instant is overdue. Not
-        fitted, and it teaches the front end nothing: the learnt state is put back and the speed
-        estimate coasts on the accelerometer."""
-        speed_before = (self._speed_estimate_mps, self._speed_time_s)
-        learnt = [getattr(self, name) for name in LEARNT_STATE]
-        result = self._compute_sample(stale)
-        for name, value in zip(LEARNT_STATE, learnt):
-            setattr(self, name, value)
-        if result.sample is not None:
-            result.sample.usable = (False, False, False, False)
-            self._coast_speed(speed_before, result.sample)
-        return result
-
     def _mark_body_mu(self, sample: PhysicalSample) -> None:
         """`sample.body_mu`: the car's total longitudinal tyre force over its weight, from the
         accelerometer (offset removed) less drag and rolling resistance, where the wheels' own
@@ -581,30 +511,6 @@ class FrontEnd(WheelSpeedFilter, BodyEquation):
             tuple([value(n, t) for n in ABS_FLAG_NAMES[1:]]) if self._has_wheel_abs_flags else (None,) * 4)
 
     # -- the physics ---------------------------------------------------------------------------
-    def _coast_speed(self, before: tuple[float | None, float | None], sample: PhysicalSample) -> None:
-        """The speed estimate carried over a suspect sample by the accelerometer alone: a
-        corrupted or spoofed wheel speed pulls it up (a wheel faster than the estimate), and under
-        ABS nothing pulls it down again for the rest of the stop (every slip would read high).
-
-        While a second node sends the accelerometer's message, the wheels are trusted: the
-        update made with the frame taken keeps their pull, and only its deceleration is
-        exchanged for the one `_accel_of_two_senders` picks."""
-        v, t = before
-        time_s = sample.time_s
-        if v is None or t is None or self._speed_time_s is None or self._speed_estimate_mps is None:
-            return
-        accel = self._value("accel_long", time_s)
-        if accel is None or not math.isfinite(accel) or not 0.0 < time_s - t <= self.options.max_gap:
-            return
-        chosen = self._accel_of_two_senders(accel, sample)
-        if chosen is not None:
-            corrected = self._speed_estimate_mps + (chosen - accel) * (time_s - t)
-            self._speed_estimate_mps = min(max(corrected, 0.0), MAX_SPEED_MPS)
-            return
-        coasted = min(max(v + (accel - self._accel_bias_mps2) * (time_s - t), 0.0), MAX_SPEED_MPS)
-        # (only ever down to it: a reference sensor or a slower wheel may have said less)
-        self._speed_estimate_mps = min(self._speed_estimate_mps, coasted)
-
     def _zeroed_pressures(self, values: Mapping[str, float]) -> Mapping[str, float]:
         """A pressure message's values less each sensor's zero point (`_learn_pressure_zeros`),
         not below 0; the raw readings are kept for the learning."""
@@ -651,59 +557,6 @@ class FrontEnd(WheelSpeedFilter, BodyEquation):
             else:
                 zero[name] = max(0.0, float(statistics.median_low(values)))
         self._pressure_zeroed = any(z > 0.0 for z in zero.values())
-
-    def _wheel_senders_told_apart(self, time_s: float) -> bool:
-        """While only wheel speeds have a second sender in doubt: whether the car's speed tells
-        which one is genuine. Braking, no wheel turns faster than the car moves (its slip is
-        ≥ 0), so a sender whose fastest wheel is faster than the speed estimate (carried on the
-        accelerometer alone while the senders are in doubt) by more than the wheels' radii,
-        noise and a curve's outer track allow is not the car's: a replay of an earlier, faster
-        moment of the stop, or of the cruise before it, flat through the brake onset. The frames
-        taken are then the other sender's, and when each one in the derivative window fits the
-        car's speed as well, the sample is fitted."""
-        v = self._speed_estimate_mps
-        at = self._speed_time_s
-        accel = self._value("accel_long", time_s)
-        if v is None or at is None or accel is None or not accel - self._accel_bias_mps2 <= -MIN_TELLING_DECEL_MPS2:
-            return False
-        veh = self.vehicle
-        lateral = self._value("accel_lat", time_s)
-        if lateral is None or not math.isfinite(lateral):
-            return False
-        outer = 0.5 * max(veh.track_front, veh.track_rear) * abs(lateral) / max(v, 1.0)
-
-        def faster_than_the_car(wheel_mps: float, car_mps: float) -> bool:
-            return wheel_mps > car_mps * (1.0 + WHEEL_RADIUS_SPREAD) + WHEEL_SPEED_NOISE_MPS + outer
-
-        radius = veh.wheel_radius
-        for message, rival in self.gate.contested_senders(time_s).items():
-            names = self._message_signals.get(message, ())
-            if rival is None or not names or not set(names) <= set(WHEEL_SPEED_NAMES):
-                return False
-            if not faster_than_the_car(max(rival.get(name, 0.0) for name in names) * radius, v):
-                return False
-        decel = self._accel_bias_mps2 - accel
-        for t, speeds in zip(self._wheel_times, self._wheel_speeds):
-            # (the car was faster before the estimate's time)
-            if faster_than_the_car(max(speeds) * radius, v + decel * max(at - t, 0.0)):
-                return False
-        return True
-
-    def _accel_of_two_senders(self, taken: float, sample: PhysicalSample) -> float | None:
-        """While a second node sends the accelerometer's message (None when none does): of the
-        value taken and the other sender's, the one nearer the car's deceleration by its tyre
-        forces (the brakes' and the wheels' inertia torques, with drag and rolling resistance:
-        the body equation the brake gain is learnt from). The frame taken may be the second
-        node's: a replay flat at brake onset while the pressures rise and the car decelerates."""
-        other = self.gate.second_source_value("accel_long", self._last_trigger_s)
-        if other is None:
-            return None
-        veh = self.vehicle
-        forces = sum(sample.tyre_force_n) + veh.resistance_force(sample.speed_mps)
-        if not math.isfinite(forces):
-            return None
-        by_forces = -forces / veh.mass + self._accel_bias_mps2
-        return other if abs(other - by_forces) < abs(taken - by_forces) else taken
 
     # The wheel's angular acceleration comes from the derivative filter, which averages ω̇ over
     # its window; the torques and the body acceleration it is set against in the wheel and body
@@ -944,73 +797,8 @@ class FrontEnd(WheelSpeedFilter, BodyEquation):
                 self._dead[i] = out[i] = True
         return out
 
-    def _update_speed(
-        self, time_s: float, wheel_linear: list[float], accel_long: float, wheels_loaded: bool
-    ) -> tuple[float, bool]:
-        opts = self.options
-        dt = 0.0 if self._speed_time_s is None else time_s - self._speed_time_s
-        self._speed_time_s = time_s
-        ref = self._value("vehicle_speed_ref", time_s) if self._has_ref_speed else None
-        fastest = max(wheel_linear)
-        if ref is not None and self._ref_fresh(time_s) and 0.0 <= ref <= MAX_SPEED_MPS and self._ref_plausible(ref, fastest):
-            self._speed_estimate_mps = ref
-            return ref, True
-        mean = sum(wheel_linear) / 4.0
-        v = self._speed_estimate_mps
-        if v is None or dt <= 0.0 or dt > opts.max_gap:
-            v = fastest
-        else:
-            v = v + accel_long * dt
-            second = _second_fastest(wheel_linear)
-            if not wheels_loaded:
-                v += opts.speed_gain_free_rolling * (mean - v)
-            elif second > v:
-                # Two wheels faster than the estimate pull it up, but no faster than a car can
-                # gain speed: one corrupt wheel speed must not carry it off (under ABS nothing
-                # pulls it down again: each glitch of one wheel ratcheted it up, every slip high).
-                v += min(opts.speed_gain_up * (second - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
-            else:
-                # Braked wheels all read low during ABS: even the least-braked one slips by
-                # several percent, so pulling towards the fastest wheel biases the speed (and
-                # every slip) low. Pull only when the estimate would put even the fastest wheel
-                # beyond what an ABS lets it slip: an accelerometer offset or a corrupt input
-                # cannot make the estimate drift up without bound.
-                ceiling = fastest / (1.0 - opts.min_braked_slip)
-                if v > ceiling:
-                    v += opts.speed_gain_down * (ceiling - v)
-        v = min(max(v, 0.0), MAX_SPEED_MPS)
-        self._speed_estimate_mps = v
-        return v, False
-
-    def _ref_plausible(self, ref: float, fastest_wheel: float) -> bool:
-        """A ground-speed reading the wheels and the recent estimate can agree with.
-
-        A braked wheel is slower than the ground, never much faster; and a single reading far
-        from the running estimate is a glitch unless the next ones say the same (then the
-        estimate was wrong and the sensor is followed again).
-        """
-        if ref + 1.0 < fastest_wheel * 0.95:
-            return False
-        if ref > fastest_wheel / (1.0 - self.options.max_all_wheel_slip) + 1.0 and fastest_wheel >= 0.5:
-            return False
-        v = self._speed_estimate_mps
-        if v is not None and abs(ref - v) > 1.0 + 0.1 * v:
-            self._ref_disagreements += 1
-            return self._ref_disagreements > 10
-        self._ref_disagreements = 0
-        return True
-
-    def _ref_fresh(self, time_s: float) -> bool:
-        message = self._signal_message["vehicle_speed_ref"]
-        h = self._history[message]
-        return (time_s - h.last_arrival_s <= self.options.stale_periods * h.period_s + 1e-3
-                or h.last_arrival_s >= time_s)
-
 # Rejections of a trigger frame that give no output at all (its time is not the bus's).
 _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
-# The fault a required input's persistently rejected frames give, by kind of rejection.
-_REJECTION_FAULTS = {"out of range": "out of range", "rate": "implausible", "second source": "from a second source",
-                     "clock step": "clock step"}
 
 
 def _input_label(signals: Iterable[str]) -> str:
@@ -1028,11 +816,6 @@ def _input_label(signals: Iterable[str]) -> str:
 _PHYSICS_TYPES = (PhysicalSample, FrontEndResult, "acceleration out of range", "brake pressure out of range",
                   "brake pressure implausible", "wheel speed glitch", "wheel speed stuck",
                   "brake pressure disagrees with deceleration")
-
-
-def _second_fastest(speeds: list[float]) -> float:
-    """The second-largest of the wheels' speeds (`_frontcore.c`'s `second_of`)."""
-    return sorted(speeds)[-2]
 
 
 def _interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:

@@ -24,7 +24,7 @@ def _do_check(args: argparse.Namespace) -> int:
 
     from ..codec import validate_against_dbc
     from ..config import ConfigError, default_config_path, load_config
-    from ..frontend import OPTIONAL_INPUTS, REQUIRED_INPUTS
+    from ..input_names import OPTIONAL_INPUTS, REQUIRED_INPUTS
 
     chosen = args.config_path or args.config_option
     path = Path(chosen) if chosen else default_config_path()

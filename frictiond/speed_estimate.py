@@ -1,0 +1,117 @@
+"""The car's speed over ground, which every slip is measured against.
+
+A ground-speed sensor's reading while it is fresh and plausible; otherwise an observer driven by
+the accelerometer and corrected by the wheels: pulled towards their mean while they roll free,
+under braking only up by two wheels faster than it (never faster than a car gains speed) and
+down only when even the fastest wheel would slip more than an ABS lets it; over a suspect
+sample carried by the accelerometer alone. `SpeedEstimate` is a part of `frontend.FrontEnd`
+(its state, `_speed_estimate_mps` and `_speed_time_s`, is the front end's, where
+`_frontcore.sample_physics` reads and writes it); the code here is the fallback without a C
+compiler and the reference (tests compare).
+"""
+from __future__ import annotations
+
+import math
+
+from .samples import PhysicalSample
+
+MAX_SPEED_MPS = 120.0
+# No car brakes or gains speed faster than this: beyond it an acceleration input is broken, and an
+# estimate pulled up by the wheels faster than this is following a corrupt wheel speed.
+MAX_ABS_ACCEL_MPS2 = 30.0
+
+
+class SpeedEstimate:
+    """The speed estimate's update per sample (`_update_speed`) and over a suspect one
+    (`_coast_speed`)."""
+
+    def _update_speed(
+        self, time_s: float, wheel_linear: list[float], accel_long: float, wheels_loaded: bool
+    ) -> tuple[float, bool]:
+        opts = self.options
+        dt = 0.0 if self._speed_time_s is None else time_s - self._speed_time_s
+        self._speed_time_s = time_s
+        ref = self._value("vehicle_speed_ref", time_s) if self._has_ref_speed else None
+        fastest = max(wheel_linear)
+        if ref is not None and self._ref_fresh(time_s) and 0.0 <= ref <= MAX_SPEED_MPS and self._ref_plausible(ref, fastest):
+            self._speed_estimate_mps = ref
+            return ref, True
+        mean = sum(wheel_linear) / 4.0
+        v = self._speed_estimate_mps
+        if v is None or dt <= 0.0 or dt > opts.max_gap:
+            v = fastest
+        else:
+            v = v + accel_long * dt
+            second = _second_fastest(wheel_linear)
+            if not wheels_loaded:
+                v += opts.speed_gain_free_rolling * (mean - v)
+            elif second > v:
+                # Two wheels faster than the estimate pull it up, but no faster than a car can
+                # gain speed: one corrupt wheel speed must not carry it off (under ABS nothing
+                # pulls it down again: each glitch of one wheel ratcheted it up, every slip high).
+                v += min(opts.speed_gain_up * (second - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
+            else:
+                # Braked wheels all read low during ABS: even the least-braked one slips by
+                # several percent, so pulling towards the fastest wheel biases the speed (and
+                # every slip) low. Pull only when the estimate would put even the fastest wheel
+                # beyond what an ABS lets it slip: an accelerometer offset or a corrupt input
+                # cannot make the estimate drift up without bound.
+                ceiling = fastest / (1.0 - opts.min_braked_slip)
+                if v > ceiling:
+                    v += opts.speed_gain_down * (ceiling - v)
+        v = min(max(v, 0.0), MAX_SPEED_MPS)
+        self._speed_estimate_mps = v
+        return v, False
+
+    def _ref_plausible(self, ref: float, fastest_wheel: float) -> bool:
+        """A ground-speed reading the wheels and the recent estimate can agree with.
+
+        A braked wheel is slower than the ground, never much faster; and a single reading far
+        from the running estimate is a glitch unless the next ones say the same (then the
+        estimate was wrong and the sensor is followed again).
+        """
+        if ref + 1.0 < fastest_wheel * 0.95:
+            return False
+        if ref > fastest_wheel / (1.0 - self.options.max_all_wheel_slip) + 1.0 and fastest_wheel >= 0.5:
+            return False
+        v = self._speed_estimate_mps
+        if v is not None and abs(ref - v) > 1.0 + 0.1 * v:
+            self._ref_disagreements += 1
+            return self._ref_disagreements > 10
+        self._ref_disagreements = 0
+        return True
+
+    def _ref_fresh(self, time_s: float) -> bool:
+        message = self._signal_message["vehicle_speed_ref"]
+        h = self._history[message]
+        return (time_s - h.last_arrival_s <= self.options.stale_periods * h.period_s + 1e-3
+                or h.last_arrival_s >= time_s)
+
+    def _coast_speed(self, before: tuple[float | None, float | None], sample: PhysicalSample) -> None:
+        """The speed estimate carried over a suspect sample by the accelerometer alone: a
+        corrupted or spoofed wheel speed pulls it up (a wheel faster than the estimate), and under
+        ABS nothing pulls it down again for the rest of the stop (every slip would read high).
+
+        While a second node sends the accelerometer's message, the wheels are trusted: the
+        update made with the frame taken keeps their pull, and only its deceleration is
+        exchanged for the one `_accel_of_two_senders` picks."""
+        v, t = before
+        time_s = sample.time_s
+        if v is None or t is None or self._speed_time_s is None or self._speed_estimate_mps is None:
+            return
+        accel = self._value("accel_long", time_s)
+        if accel is None or not math.isfinite(accel) or not 0.0 < time_s - t <= self.options.max_gap:
+            return
+        chosen = self._accel_of_two_senders(accel, sample)
+        if chosen is not None:
+            corrected = self._speed_estimate_mps + (chosen - accel) * (time_s - t)
+            self._speed_estimate_mps = min(max(corrected, 0.0), MAX_SPEED_MPS)
+            return
+        coasted = min(max(v + (accel - self._accel_bias_mps2) * (time_s - t), 0.0), MAX_SPEED_MPS)
+        # (only ever down to it: a reference sensor or a slower wheel may have said less)
+        self._speed_estimate_mps = min(self._speed_estimate_mps, coasted)
+
+
+def _second_fastest(speeds: list[float]) -> float:
+    """The second-largest of the wheels' speeds (`_frontcore.c`'s `second_of`)."""
+    return sorted(speeds)[-2]

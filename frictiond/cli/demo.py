@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import threading
-import time
 
 from .common import add_config_argument, load_config_or_exit
 

@@ -575,58 +575,13 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence, EstimateReport
         if not math.isfinite(t) or not math.isfinite(sample.speed_mps):
             return self._hold(self._last_sample_s if math.isfinite(self._last_sample_s) else 0.0, 0.0)
         if t < self._last_sample_s - 1e-3:
-            # The clock went backwards (log splice, clock step): the window's samples would get
-            # weights from the future. Start the window again; the fitted parameters stay.
-            window.clear()
-            self._mu_history.clear()
-            self._last_update_s = None
-            # The times kept as anchors (last excitation, last jump) are from the old clock:
-            # left there, `now − last excitation` would stay negative, and a VALID would be
-            # held for as long as the clock went back (hours of free rolling) instead of
-            # `hold_s`. Carry them over the step, as if one bus period had passed.
-            step = t - self._last_sample_s - 0.01
-            if math.isfinite(self._last_excited_s):
-                self._last_excited_s += step
-            if math.isfinite(self._last_jump_s):
-                self._last_jump_s += step
-            self._excited_since_s = math.inf
+            self._restart_after_clock_step(t)
         self._last_sample_s = t
         self._input_share = sample.input_suspect_share   # (corrupted input costs confidence: input_quality)
         window.drop_before(t - o.window_s, self.core)
         fresh = len(window) == 0
-        added = 0
         v = sample.speed_mps
-        loads = sample.normal_force_n
-        total_load = sum(loads)
-        if total_load > 0 and min(loads) >= 0:   # (a NaN load makes the sum NaN: fails the first)
-            self._load_share = [f / total_load for f in loads]
-        scales = None
-        slips, mus, wheels = [], [], []
-        spread = sample.slip_spread
-        min_slip, isfinite, usable = o.min_slip, math.isfinite, sample.usable
-        wheel_slips, wheel_mus = sample.slip, sample.mu_used
-        self._follow_runaways(t, wheel_slips)
-        abs_active = sample.abs_active
-        body_mu = sample.body_mu
-        if body_mu == body_mu:   # (not NaN: braking, with a fresh accelerometer)
-            self._body_mu.push(t, body_mu)
-        if abs_active[0] or abs_active[1] or abs_active[2] or abs_active[3]:
-            for i in range(N_WHEELS):
-                if abs_active[i]:
-                    self._abs_seen_s[i] = t
-        for i in range(N_WHEELS):   # (indexing the four wheels: no zip/enumerate tuples per update)
-            slip, mu_used = wheel_slips[i], wheel_mus[i]
-            if usable[i] and slip >= min_slip and isfinite(mu_used):
-                if scales is None:
-                    scales = self._axle_scales()
-                slips.append(slip)
-                mus.append(mu_used * scales[i >= 2])
-                wheels.append(i)
-        if slips:
-            window.append_instant(slips, v, mus, t, wheels, self.core)
-            added = len(slips)
-            if spread is not None:
-                window.set_spread(added, [spread[i] for i in wheels], sample.slip_spread_weights)
+        added = self._take_in(sample)
         if added and fresh:
             self._new_event()
         if added and o.spread_loss_weight > 0 and self._fits > self._spread_loss_fit:
@@ -652,6 +607,62 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence, EstimateReport
         if estimate.status != Status.VALID and v >= o.peak_evidence_min_speed:
             self._withdrawn_moving_s = t   # (`_hold`: what was withdrawn while moving stays withdrawn)
         return estimate
+
+    def _restart_after_clock_step(self, t: float) -> None:
+        """The clock went backwards (log splice, clock step): the window's samples would get
+        weights from the future. Start the window again; the fitted parameters stay."""
+        self._window.clear()
+        self._mu_history.clear()
+        self._last_update_s = None
+        # The times kept as anchors (last excitation, last jump) are from the old clock: left
+        # there, `now − last excitation` would stay negative, and a VALID would be held for as
+        # long as the clock went back (hours of free rolling) instead of `hold_s`. Carry them
+        # over the step, as if one bus period had passed.
+        step = t - self._last_sample_s - 0.01
+        if math.isfinite(self._last_excited_s):
+            self._last_excited_s += step
+        if math.isfinite(self._last_jump_s):
+            self._last_jump_s += step
+        self._excited_since_s = math.inf
+
+    def _take_in(self, sample: PhysicalSample) -> int:
+        """The sample's usable wheels into the window (each wheel's μ corrected for the axles'
+        brake-gain split), and what the evidence follows per sample: the loads' shares, the
+        wheels' runaways, the body's utilisation, the wheels an ABS works. Returns how many
+        wheels entered the window."""
+        t, v = sample.time_s, sample.speed_mps
+        loads = sample.normal_force_n
+        total_load = sum(loads)
+        if total_load > 0 and min(loads) >= 0:   # (a NaN load makes the sum NaN: fails the first)
+            self._load_share = [f / total_load for f in loads]
+        scales = None
+        slips, mus, wheels = [], [], []
+        spread = sample.slip_spread
+        min_slip, isfinite, usable = self.options.min_slip, math.isfinite, sample.usable
+        wheel_slips, wheel_mus = sample.slip, sample.mu_used
+        self._follow_runaways(t, wheel_slips)
+        abs_active = sample.abs_active
+        body_mu = sample.body_mu
+        if body_mu == body_mu:   # (not NaN: braking, with a fresh accelerometer)
+            self._body_mu.push(t, body_mu)
+        if abs_active[0] or abs_active[1] or abs_active[2] or abs_active[3]:
+            for i in range(N_WHEELS):
+                if abs_active[i]:
+                    self._abs_seen_s[i] = t
+        for i in range(N_WHEELS):   # (indexing the four wheels: no zip/enumerate tuples per update)
+            slip, mu_used = wheel_slips[i], wheel_mus[i]
+            if usable[i] and slip >= min_slip and isfinite(mu_used):
+                if scales is None:
+                    scales = self._axle_scales()
+                slips.append(slip)
+                mus.append(mu_used * scales[i >= 2])
+                wheels.append(i)
+        if not slips:
+            return 0
+        self._window.append_instant(slips, v, mus, t, wheels, self.core)
+        if spread is not None:
+            self._window.set_spread(len(slips), [spread[i] for i in wheels], sample.slip_spread_weights)
+        return len(slips)
 
     def _spread_loss(self) -> float:
         """The share of the fitted curve that the front end's mean over each sample's slips

@@ -166,28 +166,8 @@ class EstimateConfidence:
             return 0.0
         if self._excited_since_s == math.inf or now_s < self._excited_since_s:
             self._excited_since_s = now_s
-        # The reference is the median of the fits around `drift_window_s` ago (± a sixth of it),
-        # not the single oldest one: a fit that dipped for a cycle (an ABS release, 6 % on MF
-        # ice) would otherwise cost the confidence twice, when it happens and again a drift
-        # window later as the reference, making a settled estimate CONVERGING for a cycle.
-        since = now_s - o.drift_window_s * (7.0 / 6.0)
-        reference = (self.core.drift_reference(history, since, o.drift_window_s / 3.0) if self.core is not None
-                     else None)
-        if reference is None:
-            values: list[float] = []
-            until = math.inf
-            for t, m in history:     # (ascending times)
-                if t < since:
-                    continue
-                if not values:
-                    until = t + o.drift_window_s / 3.0
-                elif t > until:
-                    break
-                values.append(m)
-            values.sort()
-            reference = values[len(values) // 2]   # (never empty: this fit was just appended)
         scale = max(mu_max, 0.05)
-        drift = abs(mu_max - reference) / scale
+        drift = abs(mu_max - self._drift_reference(now_s)) / scale
         rel_std = mu_std * self._residual_scale / scale if math.isfinite(mu_std) else 10.0
         # The error's σ: the delta-method spread, the drift and the floor. The spread counts the
         # samples as independent evidence of the peak; they are not: a static model's misfit of a
@@ -207,6 +187,32 @@ class EstimateConfidence:
         confidence = excitation * ramp * innovation * within_band
         confidence *= input_quality.confidence_factor(self._input_share)
         return confidence if math.isfinite(confidence) else 0.0
+
+    def _drift_reference(self, now_s: float) -> float:
+        """What μ_max is compared with for its drift: the median of the fits around
+        `drift_window_s` ago (± a sixth of it), not the single oldest one. A fit that dipped for a
+        cycle (an ABS release, 6 % on MF ice) would otherwise cost the confidence twice, when it
+        happens and again a drift window later as the reference, making a settled estimate
+        CONVERGING for a cycle."""
+        o = self.options
+        history = self._mu_history
+        since = now_s - o.drift_window_s * (7.0 / 6.0)
+        if self.core is not None:
+            reference = self.core.drift_reference(history, since, o.drift_window_s / 3.0)
+            if reference is not None:
+                return reference
+        values: list[float] = []
+        until = math.inf
+        for t, m in history:     # (ascending times)
+            if t < since:
+                continue
+            if not values:
+                until = t + o.drift_window_s / 3.0
+            elif t > until:
+                break
+            values.append(m)
+        values.sort()
+        return values[len(values) // 2]   # (never empty: the newest fit was just appended)
 
     def _excess_over_fit(self, fitted_mu: Sequence[float], wheel_mu: Sequence[float],
                          wheel_lam: Sequence[float]) -> float:

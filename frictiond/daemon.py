@@ -481,44 +481,12 @@ class Daemon:
             if self._reload_requested:
                 self._reload()
                 cfg = self.config
-            bus = self.bus
-            if bus is None:
-                now = mono()
-                if now >= self._next_open:
-                    self._open_bus()
-                else:
-                    stop.wait(min(0.1, self._next_open - now, self.tick_interval_s))
-            else:
-                try:
-                    direct = self._direct
-                    msg = direct.recv(self.tick_interval_s) if direct is not None else bus.recv(timeout=self.tick_interval_s)
-                except (can.CanError, OSError, ValueError) as exc:
-                    self._bus_failed(exc, "receive")
-                    msg = None
-                else:
-                    self._rx_backlog = msg is not None
-                    if self.bus_down:
-                        self._bus_ok()
-                    elif self._backoff != FIRST_BACKOFF_S:
-                        self._backoff = FIRST_BACKOFF_S
-                    if msg is not None:
-                        self._handle(msg)
+            self._receive_one()
             # --- housekeeping (all on the monotonic clock)
             now = mono()
             if now >= next_tick:
                 next_tick = now + self.tick_interval_s
-                if self.bus is not None:
-                    try:
-                        out = self.pipeline.tick(self.frame_now())
-                    except Exception:  # noqa: BLE001
-                        self.stats.internal_errors += 1
-                        out = []
-                        if self.stats.internal_errors == 1:
-                            log.exception("internal error in the stale-input tick")
-                    if out:
-                        self._send(out)
-                if self.estimate_log is not None:
-                    self.estimate_log.poll()
+                self._stale_tick()
             if wd_interval and now >= next_wd and self.stats.rx_frames > wd_rx and not self.bus_down:
                 self.notifier.watchdog()
                 wd_rx = self.stats.rx_frames
@@ -530,6 +498,47 @@ class Daemon:
                 next_state = now + cfg.daemon.state_interval
                 if self.pipeline.stats.updates != self._updates_saved:
                     self.save_state()
+
+    def _receive_one(self) -> None:
+        """One frame off the bus and handled, waiting at most a tick for it; without a bus, open
+        it again when its back-off has passed."""
+        bus = self.bus
+        if bus is None:
+            now = self._mono()
+            if now >= self._next_open:
+                self._open_bus()
+            else:
+                self._stop.wait(min(0.1, self._next_open - now, self.tick_interval_s))
+            return
+        try:
+            direct = self._direct
+            msg = direct.recv(self.tick_interval_s) if direct is not None else bus.recv(timeout=self.tick_interval_s)
+        except (can.CanError, OSError, ValueError) as exc:
+            self._bus_failed(exc, "receive")
+            return
+        self._rx_backlog = msg is not None
+        if self.bus_down:
+            self._bus_ok()
+        elif self._backoff != FIRST_BACKOFF_S:
+            self._backoff = FIRST_BACKOFF_S
+        if msg is not None:
+            self._handle(msg)
+
+    def _stale_tick(self) -> None:
+        """The pipeline's tick (stale inputs said on the bus even when no frame comes) and the
+        estimate log's flush, once per `tick_interval_s`."""
+        if self.bus is not None:
+            try:
+                out = self.pipeline.tick(self.frame_now())
+            except Exception:  # noqa: BLE001
+                self.stats.internal_errors += 1
+                out = []
+                if self.stats.internal_errors == 1:
+                    log.exception("internal error in the stale-input tick")
+            if out:
+                self._send(out)
+        if self.estimate_log is not None:
+            self.estimate_log.poll()
 
     def _shutdown(self) -> None:
         self.notifier.stopping(f"stopping: {self.status_text() if hasattr(self, '_fps') else ''}")

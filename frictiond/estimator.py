@@ -29,7 +29,8 @@ Design (the choices model.md leaves open, and why):
 
 The excitation evidence is `peak_evidence.PeakEvidence`, the confidence and the vetoes on VALID
 `estimate_confidence.EstimateConfidence`, the report of a fit (peaks, spread, status, hold)
-`estimate_report.EstimateReport`: parts of the estimator class, each in its own module.
+`estimate_report.EstimateReport`, the fit itself and the jump test on its residuals
+`window_fit.WindowFit`: parts of the estimator class, each in its own module.
 """
 from __future__ import annotations
 
@@ -40,20 +41,19 @@ from typing import Any
 
 import numpy as np
 
-from . import trust_region
-
 try:
     # The per-update fit compiled (setup.py builds it when a C compiler is there); without it,
-    # the same fit runs on the numpy path below (`_normal` + `trust_region.solve_normal`).
+    # the same fit runs on the numpy path (`window_fit`: `_normal` + `trust_region.solve_normal`).
     from . import _fitcore as compiled_fit
 except ImportError:  # pragma: no cover - depends on the install
     compiled_fit = None
 from .samples import FrictionEstimate, PhysicalSample, Status
-from .tyre_model import _SMALL_Z, MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta
+from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta
 from .vehicle import VehicleParams
 from .estimate_confidence import EstimateConfidence
 from .estimate_report import EstimateReport
 from .peak_evidence import N_WHEELS, PeakEvidence, _Runaway
+from .window_fit import WindowFit
 
 SHARED = ("sigma0", "v_s", "sigma2")
 
@@ -195,9 +195,6 @@ class LugreTROptions:
             raise ValueError("keep_valid_confidence: must not exceed valid_confidence")
         if self.theta_min <= 0:
             raise ValueError("theta_min: must be > 0")
-
-
-_WHEEL_COLUMN = np.arange(N_WHEELS)[:, None]
 
 
 class _Window:
@@ -390,7 +387,7 @@ class _SmoothedMaximum:
         self.highest = 0.0
 
 
-class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence, EstimateReport):
+class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, EstimateReport):
     """Recursive, bounded trust-region NLLS fit of static LuGre; one `update` per bus cycle."""
 
     kind = "lugre-tr"
@@ -684,32 +681,6 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence, EstimateReport
         lo = w.start + int(w.time[w.start:w.end].searchsorted(since, side="left"))
         return _spread_loss_numpy(w, lo, thetas, self._params(self._x))
 
-    def _residuals(self, x: np.ndarray, slip, speed, mu_meas, sw, wheel, rows_index=None) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted data residuals, then the priors, then the soft ties between wheels' θ.
-
-        `sw` are the data rows' weights √w/σ (fixed within one update).
-        """
-        p = self._params(x)
-        scale = self._scale
-        theta = self._thetas(x)[wheel]
-        m = len(slip)
-        n = len(x)
-        n_ties = len(self._tie_a)
-        if self._work is None or self._work.shape[0] < m:
-            self._work = np.empty((max(m, 64) * 2, 4))
-        partials = self._work[:m]
-        model = braking_mu_and_partials(slip, speed, theta, p, partials)
-        r = np.empty(m + n + n_ties)
-        J = np.zeros((m + n + n_ties, n))
-        r[:m] = sw * (model - mu_meas)
-        J[rows_index if rows_index is not None else np.arange(m), wheel] = partials[:, 0] * theta * sw  # ∂/∂ln θ
-        J[:m, N_WHEELS:] = partials[:, 1:] * sw[:, None] * scale[N_WHEELS:]
-        r[m:m + n] = (x - self._prior) / self._prior_std
-        J[m:m + n] = self._J_prior
-        r[m + n:] = self._tie_rel_d @ x[:N_WHEELS]
-        J[m + n:, :N_WHEELS] = self._tie_rel_d
-        return r, J
-
     @staticmethod
     def _thetas(x: np.ndarray) -> np.ndarray:
         """Each wheel's θ from the fitted ln θ."""
@@ -759,259 +730,8 @@ class LugreTrustRegionEstimator(PeakEvidence, EstimateConfidence, EstimateReport
     def _weights(self, now_s: float, times: np.ndarray) -> np.ndarray:
         return np.exp(np.minimum(times - now_s, 0.0) / self.options.forgetting_time_constant)
 
-    def _innovation(self, now_s: float, times: np.ndarray, r_data: np.ndarray, weights: np.ndarray) -> float:
-        """How far the newest samples' mean residual sits from zero, in standard errors.
-
-        A few hundred older samples pin the fit, so a change of road shows first as a mean
-        offset of the newest residuals far beyond the noise.
-        """
-        o = self.options
-        first = int(times.searchsorted(now_s - o.jump_window_s, side="left"))   # (times ascend)
-        n_recent = len(times) - first
-        if not self._innovation_counts(len(times), n_recent):
-            return 0.0
-        # Back from weighted, normalised residuals to μ units (model − measurement).
-        resid = r_data[first:] * o.measurement_std / np.sqrt(weights[first:])
-        # np.mean / np.std, without their wrappers (same operations, same order).
-        mean = float(resid.sum()) / n_recent
-        dev = resid - mean
-        dev *= dev
-        rms = math.sqrt(float(dev.sum()) / n_recent)
-        same_sign = abs(float(np.sign(resid).sum()) / n_recent)
-        return self._innovation_score_of(n_recent, mean, rms, same_sign)
-
-    def _innovation_counts(self, samples: int, n_recent: int) -> bool:
-        """Whether the newest `n_recent` of `samples` are enough, and few enough, to judge."""
-        return not (n_recent < 8 or self._fits < 5 or samples - n_recent < 2 * n_recent)
-
-    def _innovation_score_of(self, n_recent: int, mean: float, rms: float, same_sign: float) -> float:
-        o = self.options
-        noise = max(o.measurement_std, rms)
-        score = abs(mean) / (noise / math.sqrt(n_recent))
-        return score if same_sign > 0.7 else min(score, o.jump_threshold)
-
-    def _detect_jump(self, now_s: float, score: float) -> None:
-        """Drop the window's older samples when the newest ones disagree with the fit (a μ jump)."""
-        o = self.options
-        if score > o.jump_threshold * 2.0 and now_s - self._last_jump_s > o.jump_refractory_s:
-            self._window.drop_before(now_s - o.jump_window_s - 1e-9, self.core)
-            self._radius = None  # let the parameters move freely again
-            self._jumps += 1
-            self._last_jump_s = now_s
-            self._jump_times.append(now_s)
-            # What was valid described the old road: nothing may be held VALID from it.
-            self._last_valid = None
-            self._last_excited_s = -math.inf
-            self._excitation_cache = None
-            self._data_above_fit = 0.0
-            self._mu_history.clear()
-            self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
-            self._measured_peaks = [0.0] * N_WHEELS
-            # (The peaks the wheels showed were the old road's.)
-            self._wheel_shown_s = [-math.inf] * N_WHEELS
-            self._shape_showed_peak = [False] * N_WHEELS
             # (`_peak_seen_speed` stays: the stop is still in ABS, only on another road; a wheel held
             # past the new fit's peak is evidence of it as much as of the old one's.)
-
-    def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
-        """Unweighted Jacobian rows and model − measurement of window samples [lo, hi) at x.
-
-        `out` (8, hi − lo): rows 0–3 ∂μ/∂ln θ_wheel (one-hot), 4–6 ∂μ/∂(σ0, v_s, σ2) in the scaled
-        variables, 7 μ_model − μ_meas. The formulas of `braking_mu_and_partials`, on the
-        window's precomputed per-sample columns.
-        """
-        w = self._window
-        b = self._base
-        sc4, sc5, sc6 = self._shared_scale
-        sigma0, v_s, sigma2 = float(x[4]) * sc4, float(x[5]) * sc5, float(x[6]) * sc6
-        thetas = self._thetas(x)
-        wheel = w.wheel[lo:hi]
-        onehot = wheel == _WHEEL_COLUMN    # (N_WHEELS, hi − lo): the ln θ column of each sample
-        alpha = self._alpha
-        dmu = b.mu_s - b.mu_c
-        ratio = w.pow_lam_v[lo:hi] * v_s**-alpha
-        e = np.exp(-ratio)
-        g = e * dmu
-        g += b.mu_c
-        inv_t = (1.0 / thetas)[wheel]
-        Z = (thetas * sigma0)[wheel]
-        Z *= w.stiff[lo:hi]
-        Z /= g
-        if hi > lo and Z.min() < _SMALL_Z:
-            partials = np.empty((hi - lo, 4))
-            model = braking_mu_and_partials(w.slip[lo:hi], w.speed[lo:hi], thetas[wheel], self._params(x), partials)
-            partials[:, 0] *= thetas[wheel]     # ∂/∂ln θ
-            np.multiply(onehot, partials[:, 0], out=out[:N_WHEELS])
-            out[4] = partials[:, 1] * sc4
-            out[5] = partials[:, 2] * sc5
-            out[6] = partials[:, 3] * sc6
-            np.subtract(model, w.mu[lo:hi], out=out[7])
-            return
-        om = np.expm1(-Z)
-        om *= -1.0                      # 1 − e^(−Z)
-        iz = 1.0 / Z
-        F = 1.0 - om * iz
-        ZdF = om * (1.0 + Z)
-        ZdF -= Z
-        ZdF *= iz                       # Z·F'(Z)
-        FmZ = F - ZdF
-        gt = g * inv_t
-        a0 = gt * FmZ                   # −∂μ/∂ln θ = (g/θ)(F − Z·F')
-        np.multiply(onehot, a0, out=out[:N_WHEELS])
-        out[:N_WHEELS] *= -1.0
-        np.multiply(gt, ZdF, out=out[4])
-        out[4] *= sc4 / sigma0
-        np.multiply(FmZ, inv_t, out=out[5])
-        out[5] *= e
-        out[5] *= ratio
-        out[5] *= dmu * alpha / v_s * sc5
-        lv = w.lam_v[lo:hi]
-        np.multiply(lv, sc6, out=out[6])
-        np.multiply(gt, F, out=out[7])
-        out[7] += sigma2 * lv
-        out[7] -= w.mu[lo:hi]
-
-    def _rows_few(self, x: np.ndarray, lo: int, hi: int) -> None:
-        """`_rows` for the few samples an update adds, into the window's row cache, in floats."""
-        w = self._window
-        b = self._base
-        sc4, sc5, sc6 = self._shared_scale
-        xs = x.tolist()
-        thetas = [math.exp(u) for u in xs[:N_WHEELS]]
-        sigma0, v_s, sigma2 = xs[4] * sc4, xs[5] * sc5, xs[6] * sc6
-        alpha = self._alpha
-        dmu, mu_c = b.mu_s - b.mu_c, b.mu_c
-        v_pow = v_s**-alpha
-        k4 = sc4 / sigma0
-        k5 = dmu * alpha / v_s * sc5
-        exp, expm1 = math.exp, math.expm1
-        cols = []
-        for j in range(lo, hi):
-            wi = int(w.wheel[j])
-            th = thetas[wi]
-            ratio = float(w.pow_lam_v[j]) * v_pow
-            e = exp(-ratio)
-            g = e * dmu + mu_c
-            inv_t = 1.0 / th
-            Z = (th * sigma0) * float(w.stiff[j]) / g
-            if not Z >= _SMALL_Z:
-                self._rows(x, lo, hi, w.rows[:, lo:hi])
-                return
-            om = -expm1(-Z)
-            iz = 1.0 / Z
-            F = 1.0 - om * iz
-            ZdF = (om * (1.0 + Z) - Z) * iz
-            FmZ = F - ZdF
-            gt = g * inv_t
-            lv = float(w.lam_v[j])
-            col = [0.0] * N_WHEELS + [gt * ZdF * k4, FmZ * inv_t * e * ratio * k5, lv * sc6,
-                                      gt * F + sigma2 * lv - float(w.mu[j])]
-            col[wi] = -(gt * FmZ)
-            cols.append(col)
-        if cols:
-            w.rows[:, lo:hi] = np.array(cols).T
-
-    def _normal(self, x: np.ndarray, sw: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, tuple]:
-        """½‖r‖², Jᵀr and JᵀJ of `_residuals` (data rows weighted by `sw`, priors, ties) at x."""
-        w = self._window
-        lo, hi = w.start, w.end
-        cache_x = self._cache_x
-        if cache_x is not None and w.cached_end > lo and (x == cache_x).all():
-            # The rows of the samples already in the window were computed at this x by the
-            # last update (its accepted point): only the new samples' rows are missing.
-            if w.cached_end < hi:
-                self._rows_few(x, w.cached_end, hi)
-                w.cached_end = hi
-            rows = w.rows[:, lo:hi]
-            fresh = None
-        else:
-            fresh = rows = np.empty((w.rows.shape[0], hi - lo))
-            self._rows(x, lo, hi, rows)
-        # One product gives JᵀJ, Jᵀr and rᵀr: the weighted data rows, then the prior rows
-        # (x − prior)/std and the tie rows (ln θ_a − ln θ_b)/rel appended as further columns.
-        m = hi - lo
-        n = len(x)
-        B = np.empty((n + 1, m + n + N_WHEELS))
-        np.multiply(rows, sw, out=B[:, :m])
-        B[:n, m:m + n] = self._prior_rows
-        np.multiply(x - self._prior, self._inv_prior_std, out=B[n, m:m + n])
-        B[:N_WHEELS, m + n:] = self._tie_rows_t
-        B[N_WHEELS:n, m + n:] = 0.0
-        np.dot(self._tie_rel_d, x[:N_WHEELS], out=B[n, m + n:])
-        M = np.dot(B, B.T)
-        N = M[:n, :n]
-        grad = M[:n, n]
-        cost = float(M[n, n])
-        return 0.5 * cost, grad, N, (fresh, B[n, :m], x)
-
-    def _fit(self, now_s: float, speed: float) -> FrictionEstimate:
-        o = self.options
-        if self.core is not None:
-            return self._fit_compiled(now_s, speed)
-        slip, speeds, mu_meas, times, wheel = self._window.view()
-        weights = self._weights(now_s, times)
-        w_sum = float(weights.sum())
-        sw = np.sqrt(weights) * (1.0 / o.measurement_std)
-        normal, r_data = self._solve_numpy(sw)
-        self._numpy_residuals = r_data / sw
-        self._fits += 1
-        self._last_fit_s = now_s
-        self._innovation_score = self._innovation(now_s, times, r_data, weights)
-        estimate = self._report(now_s, speed, float(r_data @ r_data), normal, weights, w_sum, len(slip))
-        self._detect_jump(now_s, self._innovation_score)
-        return estimate
-
-    def _fit_compiled(self, now_s: float, speed: float) -> FrictionEstimate:
-        """`_fit` in one compiled call on the window's own columns (`_fitcore.fit_window`: the
-        weights, the trust-region iterations and the newest residuals' bias), without slicing
-        them here: numpy's per-call machinery was most of an update's cost on a cold cache."""
-        o = self.options
-        w = self._window
-        lo, hi = w.start, w.end
-        x = self._x.copy()
-        # The rows of the samples already in the window were computed at this x by the last
-        # update (its result): only the new samples' rows are computed for the first evaluation.
-        cached = w.core_cached_end - lo if self._core_rows_x is not None and w.core_cached_end > lo else 0
-        normal = self._normal_buffer
-        w_sum, radius, residual_ss, first, mean, rms, same_sign = self.core.fit_window(
-            w.core_columns, lo, hi, now_s, o.forgetting_time_constant, o.measurement_std, now_s - o.jump_window_s,
-            x, self._lb, self._ub, self._prior, self._inv_prior_std, self._tie_rel_d, self._gradient_buffer, normal,
-            self._core_constants, math.nan if self._radius is None else self._radius, o.max_iterations, o.ftol,
-            o.xtol, 1e-8, o.predicted_ftol, 4, self._core_rows_x if cached else x, cached)
-        w.core_cached_end = hi
-        self._core_rows_x = x
-        self._cache_x = None   # (the numpy path's row cache is not kept up here)
-        self._x = x
-        self._radius = max(radius, 1e-3)
-        self._fits += 1
-        self._last_fit_s = now_s
-        m = hi - lo
-        n_recent = m - first
-        self._innovation_score = (self._innovation_score_of(n_recent, mean, rms, same_sign)
-                                  if self._innovation_counts(m, n_recent) else 0.0)
-        estimate = self._report(now_s, speed, residual_ss, normal, None, w_sum, m)
-        self._detect_jump(now_s, self._innovation_score)
-        return estimate
-
-    def _solve_numpy(self, sw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """`_solve_compiled` on the numpy path: `_normal` driven by `trust_region.solve_normal`."""
-        o = self.options
-
-        def fun(x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, tuple]:
-            return self._normal(x, sw)
-
-        result = trust_region.solve_normal(fun, self._x, self._lb, self._ub, radius=self._radius,
-                                           max_iterations=o.max_iterations, ftol=o.ftol, xtol=o.xtol, gtol=1e-8,
-                                           max_rejections=4, predicted_ftol=o.predicted_ftol)
-        fresh, r_data, x_at = result.extra
-        window = self._window
-        if fresh is not None:
-            window.rows[:, window.start:window.end] = fresh
-        window.cached_end = window.end
-        self._cache_x = x_at
-        self._x = result.x
-        self._radius = max(result.radius, 1e-3)
-        return result.normal, r_data
 
     def _due(self, step: int) -> bool:
         """Whether this fit refreshes one of the slow-moving quantities (0 slip range, 1 excitation,

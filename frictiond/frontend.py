@@ -209,6 +209,15 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         # The compiled derivative filter when installed; `None` runs the float code (tests compare).
         self.core = compiled_front
         self.trigger_message = trigger_message
+        self._map_messages(message_signals, message_periods)
+        self._size_filter()
+        self._plan_sample_inputs()
+        self.reset()
+
+    def _map_messages(self, message_signals: Mapping[str, Iterable[str]],
+                      message_periods: Mapping[str, float | None]) -> None:
+        """Which message carries each canonical signal, and each message's history; `ValueError`
+        when a required input is not mapped."""
         self._signal_message: dict[str, str] = {}
         for message, names in message_signals.items():
             for name in names:
@@ -222,21 +231,25 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         if missing:
             raise ValueError(f"required inputs not mapped: {', '.join(missing)}")
         self._history = {
-            m: _MessageHistory(p if p and p > 0 else options.default_period)
+            m: _MessageHistory(p if p and p > 0 else self.options.default_period)
             for m, p in message_periods.items()
         }
         for m in message_signals:
-            self._history.setdefault(m, _MessageHistory(options.default_period))
+            self._history.setdefault(m, _MessageHistory(self.options.default_period))
         self._required_histories = tuple((m, self._history[m]) for m in sorted(self.required_messages))
         # What each required message is called in a fault (its first canonical signal's kind).
         self._fault_names = {m: _input_label(message_signals[m]) for m in self.required_messages}
+
+    def _size_filter(self) -> None:
+        """The per-sample constants, for the trigger's cycle time."""
+        options, trigger = self.options, self.trigger_message
         # One wheel-speed sample per trigger: the per-sample constants (the derivative window,
         # the forgetting of the brake-gain and accelerometer-offset learning) are set for the
         # trigger's cycle time, not for 10 ms. A 7-sample window at 20 ms spans 0.12 s, over
         # which an ABS cycle's wheel speed is no quadratic: every other sample was a "glitch".
         # (Not below 4 ms: the daemon's flood guard passes at most 250 updates/s by default, and a
         # DBC claiming 1 ms would otherwise size a 61-sample window for frames that come slower.)
-        self.declared_period_s = (self._history[trigger_message].period_s if trigger_message in self._history
+        self.declared_period_s = (self._history[trigger].period_s if trigger in self._history
                                   else options.default_period)
         self.sample_period_s = max(MIN_SAMPLE_PERIOD_S, self.declared_period_s)
         # A glitch is off its neighbours by more than noise and more than a wheel's acceleration
@@ -250,6 +263,11 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         span_samples = max(3, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
         self.derivative_window = options.derivative_window or max(5, span_samples)
         self.torque_window = options.derivative_window or span_samples
+
+    def _plan_sample_inputs(self) -> None:
+        """What each sample reads and how: the optional inputs present, the lookups fetched in
+        one call, the constants of the compiled physics."""
+        vehicle, options = self.vehicle, self.options
         # Each canonical signal's history, looked up once here rather than by message per value.
         self._source = {name: self._history[m] for name, m in self._signal_message.items()}
         # Per wheel: the side of the car (−1 left) and half its axle's track.
@@ -289,7 +307,6 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
             vehicle.rolling_resistance, vehicle.drag_area_coefficient, options.brake_gain_limits,
             options.brake_gain_time_constant, options.max_slip, self._has_drive_torque, self._has_yaw_rate,
             float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation))
-        self.reset()
 
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:

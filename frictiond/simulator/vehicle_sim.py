@@ -202,6 +202,58 @@ def _roughness(rng: np.random.Generator, n: int, level: float) -> np.ndarray:
 ROUGH_ROAD_ABS = AbsParams(min_slip_rise_rel=0.10)
 
 
+def _wheels_on_dynamic_lugre(tyre, ground: np.ndarray, omega: np.ndarray, z: np.ndarray, fn: np.ndarray,
+                             tb: np.ndarray, R: float, J: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One step of the four wheels on a dynamic LuGre tyre (its bristle state `z`), semi-implicit
+    in ω: (ω after the step, the tyre forces, z after the step)."""
+    rw = omega * R
+    s = ground - rw
+    gs = tyre.g(s)
+    a = tyre.theta * tyre.sigma0 * np.abs(s) / gs + tyre.kappa * np.abs(rw) + 1e-9
+    dec = np.exp(-a * DT_S)
+    zs = (1.0 - dec) / a                          # dz_new/ds
+    z_pred = z * dec + s * zs
+    c = tyre.sigma0 + tyre.sigma1 / DT_S
+    mu0 = c * z_pred - tyre.sigma1 / DT_S * z + tyre.sigma2 * s
+    dmu_ds = c * zs + tyre.sigma2
+    stiff = R * R * fn * dmu_ds                   # −R·dFx/dω ≥ 0
+    d_omega = (-tb + R * fn * mu0) * DT_S / (J + DT_S * stiff)
+    omega_new = omega + d_omega
+    locked = omega_new < 0.0
+    if locked.any():
+        omega_new = np.maximum(omega_new, 0.0)
+    s_new = ground - omega_new * R
+    z_old = z
+    z = z_old * dec + s_new * zs
+    mu = tyre.sigma0 * z + tyre.sigma1 * (z - z_old) / DT_S + tyre.sigma2 * s_new
+    fx = mu * fn  # equals (J ω̇ + T_b)/R exactly unless the wheel locked
+    return omega_new, fx, z
+
+
+def _wheels_on_static_curve(tyre, ground: np.ndarray, omega: np.ndarray, fn: np.ndarray, tb: np.ndarray, R: float,
+                            J: float) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the four wheels on a static μ(λ) curve, semi-implicit in ω through the curve's
+    slope (explicit past the peak): (ω after the step, the tyre forces; a locked wheel slides)."""
+    rw = omega * R
+    denom = np.maximum(ground, rw)
+    denom = np.maximum(denom, 1e-6)
+    lam = (ground - rw) / denom
+    mu0 = tyre.mu(lam, ground)
+    slope = tyre.dmu_dslip(lam, ground)
+    dlam = np.where(ground >= rw, -R / np.maximum(ground, 1e-6), -ground / (R * np.maximum(omega, 1e-6) ** 2))
+    k_lin = R * fn * slope * dlam / J                # d(ω̇)/dω from the tyre
+    d_omega = (-tb + R * fn * mu0) / J * DT_S / (1.0 - DT_S * np.minimum(k_lin, 0.0))
+    omega_new = omega + d_omega
+    locked = omega_new < 0.0
+    if locked.any():
+        omega_new = np.maximum(omega_new, 0.0)
+        mu_lock = tyre.mu(np.ones(4), ground)
+        fx = np.where(locked, mu_lock * fn, (J * d_omega / DT_S + tb) / R)
+    else:
+        fx = (J * d_omega / DT_S + tb) / R
+    return omega_new, fx
+
+
 def run_dynamics(scn: Scenario, vehicle: VehicleParams, family: str, rng: np.random.Generator,
                  abs_params: AbsParams | None = None) -> Trace:
     """Integrate one scenario with the given truth tyre family; `rng` draws the per-run details
@@ -333,45 +385,10 @@ def run_dynamics(scn: Scenario, vehicle: VehicleParams, family: str, rng: np.ran
         axle = np.array([front_axle, front_axle, rear_axle, rear_axle])
         fn = axle * (0.5 + side * h * ay / (track * g)) * (1.0 + rough[k])
         # tyre + wheel, semi-implicit in omega
-        rw = omega * R
         if dyn:
-            s = ground - rw
-            gs = tyre.g(s)
-            a = tyre.theta * tyre.sigma0 * np.abs(s) / gs + tyre.kappa * np.abs(rw) + 1e-9
-            dec = np.exp(-a * DT_S)
-            zs = (1.0 - dec) / a                          # dz_new/ds
-            z_pred = z * dec + s * zs
-            c = tyre.sigma0 + tyre.sigma1 / DT_S
-            mu0 = c * z_pred - tyre.sigma1 / DT_S * z + tyre.sigma2 * s
-            dmu_ds = c * zs + tyre.sigma2
-            stiff = R * R * fn * dmu_ds                   # −R·dFx/dω ≥ 0
-            d_omega = (-tb + R * fn * mu0) * DT_S / (J + DT_S * stiff)
-            omega_new = omega + d_omega
-            locked = omega_new < 0.0
-            if locked.any():
-                omega_new = np.maximum(omega_new, 0.0)
-            s_new = ground - omega_new * R
-            z_old = z
-            z = z_old * dec + s_new * zs
-            mu = tyre.sigma0 * z + tyre.sigma1 * (z - z_old) / DT_S + tyre.sigma2 * s_new
-            fx = mu * fn  # equals (J ω̇ + T_b)/R exactly unless the wheel locked
+            omega_new, fx, z = _wheels_on_dynamic_lugre(tyre, ground, omega, z, fn, tb, R, J)
         else:
-            denom = np.maximum(ground, rw)
-            denom = np.maximum(denom, 1e-6)
-            lam = (ground - rw) / denom
-            mu0 = tyre.mu(lam, ground)
-            slope = tyre.dmu_dslip(lam, ground)
-            dlam = np.where(ground >= rw, -R / np.maximum(ground, 1e-6), -ground / (R * np.maximum(omega, 1e-6) ** 2))
-            k_lin = R * fn * slope * dlam / J                # d(ω̇)/dω from the tyre
-            d_omega = (-tb + R * fn * mu0) / J * DT_S / (1.0 - DT_S * np.minimum(k_lin, 0.0))
-            omega_new = omega + d_omega
-            locked = omega_new < 0.0
-            if locked.any():
-                omega_new = np.maximum(omega_new, 0.0)
-                mu_lock = tyre.mu(np.ones(4), ground)
-                fx = np.where(locked, mu_lock * fn, (J * d_omega / DT_S + tb) / R)
-            else:
-                fx = (J * d_omega / DT_S + tb) / R
+            omega_new, fx = _wheels_on_static_curve(tyre, ground, omega, fn, tb, R, J)
         omega_dot = (omega_new - omega) / DT_S
         # body
         ax = (-float(np.sum(fx)) - veh.rolling_resistance * v - veh.drag_area_coefficient * v * v) / M

@@ -136,49 +136,12 @@ def _truth(truth_path: str | Path | None, t_first: float | None, t_last: float |
     return rows, 0.0, False
 
 
-def plot_replay(
-    recorder: Any,
-    path: str | Path,
-    truth_path: str | Path | None = None,
-    estimator: Any = None,
-    size: tuple[float, float] | None = None,
-    dpi: float = DEFAULT_DPI,
-    pixels: tuple[int, int] | None = None,
-    title: str | None = None,
-) -> Path:
-    """Draw a replay (a `ReplayRecorder`) to `path`; format by suffix. Returns the path.
-
-    `size` is in inches at `dpi`; `pixels=(w, h)` asks for an exact raster size instead.
-    """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+def _draw_mu(ax_mu: Any, estimates: list, band: float, truth: list | None, offset: float, shifted: bool) -> None:
+    """The top panel: MuMax over time with its confidence band, the status as background, the truth."""
     from matplotlib.patches import Patch
 
-    path = Path(path)
-    if pixels is not None:
-        size = size_for_pixels(pixels[0], pixels[1], dpi)
-    if size is None:
-        size = DEFAULT_SIZE_IN
-    fig = Figure(figsize=size, dpi=dpi)
-    FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(2, 2, height_ratios=(1.1, 1.0), hspace=0.32, wspace=0.22,
-                            left=0.07, right=0.98, top=0.93, bottom=0.08)
-    ax_mu = fig.add_subplot(grid[0, :])
-    ax_slip = fig.add_subplot(grid[1, 0], sharex=ax_mu)
-    ax_curve = fig.add_subplot(grid[1, 1])
-
-    estimates = list(getattr(recorder, "estimates", []))
-    samples = list(getattr(recorder, "samples", []))
     times = [e.time_s for e in estimates]
-    t_first = times[0] if times else (samples[0].time_s if samples else None)
-    t_last = times[-1] if times else (samples[-1].time_s if samples else None)
     final = estimates[-1] if estimates else None
-    band = getattr(getattr(estimator, "options", None), "confidence_band", CONFIDENCE_BAND)
-    if not _finite(band) or band <= 0:
-        band = CONFIDENCE_BAND
-    truth, offset, shifted = _truth(truth_path, t_first, t_last)
-
-    # -- MuMax over time ----------------------------------------------------------------------
     seen_status: list[Status] = []
     for start, end, status in _status_runs(times, [Status(e.status) for e in estimates]):
         ax_mu.axvspan(start, end, color=STATUS_COLOURS.get(status, "#eeeeee"), alpha=0.35, lw=0)
@@ -211,7 +174,9 @@ def plot_replay(
     if not estimates:
         ax_mu.text(0.5, 0.5, "no estimates in this replay", transform=ax_mu.transAxes, ha="center", va="center")
 
-    # -- per-wheel slip over time -------------------------------------------------------------
+
+def _draw_slip(ax_slip: Any, samples: list, truth: list | None, offset: float, final: Any) -> None:
+    """Each wheel's slip over time (and its truth), with the slip at the final MuMax."""
     st = [s.time_s for s in samples]
     for i, wheel in enumerate(WHEELS):
         if samples:
@@ -231,8 +196,10 @@ def plot_replay(
     else:
         ax_slip.text(0.5, 0.5, "no samples", transform=ax_slip.transAxes, ha="center", va="center")
 
-    # -- μ–slip samples and the fitted curve --------------------------------------------------
-    rasterize = path.suffix.lower() not in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp")
+
+def _draw_curve(ax_curve: Any, samples: list, estimator: Any, final: Any, rasterize: bool) -> None:
+    """The usable μ–slip samples per wheel, and the fitted curve at the final estimate's speed
+    with its peak."""
     max_slip = 0.0
     min_slip = 0.0
     speeds = []
@@ -277,6 +244,53 @@ def plot_replay(
                 handle.set_alpha(1.0)
     else:
         ax_curve.text(0.5, 0.5, "no usable samples", transform=ax_curve.transAxes, ha="center", va="center")
+
+
+def plot_replay(
+    recorder: Any,
+    path: str | Path,
+    truth_path: str | Path | None = None,
+    estimator: Any = None,
+    size: tuple[float, float] | None = None,
+    dpi: float = DEFAULT_DPI,
+    pixels: tuple[int, int] | None = None,
+    title: str | None = None,
+) -> Path:
+    """Draw a replay (a `ReplayRecorder`) to `path`; format by suffix. Returns the path.
+
+    `size` is in inches at `dpi`; `pixels=(w, h)` asks for an exact raster size instead.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    path = Path(path)
+    if pixels is not None:
+        size = size_for_pixels(pixels[0], pixels[1], dpi)
+    if size is None:
+        size = DEFAULT_SIZE_IN
+    fig = Figure(figsize=size, dpi=dpi)
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(2, 2, height_ratios=(1.1, 1.0), hspace=0.32, wspace=0.22,
+                            left=0.07, right=0.98, top=0.93, bottom=0.08)
+    ax_mu = fig.add_subplot(grid[0, :])
+    ax_slip = fig.add_subplot(grid[1, 0], sharex=ax_mu)
+    ax_curve = fig.add_subplot(grid[1, 1])
+
+    estimates = list(getattr(recorder, "estimates", []))
+    samples = list(getattr(recorder, "samples", []))
+    times = [e.time_s for e in estimates]
+    t_first = times[0] if times else (samples[0].time_s if samples else None)
+    t_last = times[-1] if times else (samples[-1].time_s if samples else None)
+    final = estimates[-1] if estimates else None
+    band = getattr(getattr(estimator, "options", None), "confidence_band", CONFIDENCE_BAND)
+    if not _finite(band) or band <= 0:
+        band = CONFIDENCE_BAND
+    truth, offset, shifted = _truth(truth_path, t_first, t_last)
+
+    _draw_mu(ax_mu, estimates, band, truth, offset, shifted)
+    _draw_slip(ax_slip, samples, truth, offset, final)
+    _draw_curve(ax_curve, samples, estimator, final,
+                rasterize=path.suffix.lower() not in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp"))
 
     if title:
         fig.suptitle(title)

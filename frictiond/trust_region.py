@@ -177,6 +177,53 @@ def solve(
     return TrustRegionResult(res.x, res.cost, r, J, res.radius, res.iterations, res.converged, evaluations)
 
 
+def _scaled_gradient(xl: list[float], gl: list[float], lbl: list[float], ubl: list[float], fin_lbl: list[bool],
+                     fin_ubl: list[bool]) -> tuple[list[float], list[float], list[float], float, float, bool]:
+    """`_scaling` on floats, with what `solve_normal` needs of it: the scale d = √v, the scaled
+    gradient d·g, the diagonal term g·dv/dx, max |g·v| (the gtol test), max |d·g| and whether a
+    NaN was met."""
+    n = len(xl)
+    sqrt = math.sqrt
+    d, g_h, g_dv = [0.0] * n, [0.0] * n, [0.0] * n
+    gv_max = gh_max = 0.0
+    nan = False
+    for i in range(n):
+        gi, xi = gl[i], xl[i]
+        if gi > 0 and fin_lbl[i]:
+            vi = xi - lbl[i]
+            g_dv[i] = gi
+        elif gi < 0 and fin_ubl[i]:
+            vi = ubl[i] - xi
+            g_dv[i] = -gi
+        else:
+            vi = 1.0
+        gv = abs(gi * vi)
+        nan = nan or gv != gv
+        gv_max = gv if gv > gv_max else gv_max
+        di = sqrt(vi) if vi > 0 else 0.0
+        d[i] = di
+        ghi = di * gi
+        g_h[i] = ghi
+        ghi = abs(ghi)
+        gh_max = ghi if ghi > gh_max else gh_max
+    return d, g_h, g_dv, gv_max, gh_max, nan
+
+
+def _step_inside(s_h: list[float], d: list[float], lower_room: list[float],
+                 upper_room: list[float]) -> tuple[list[float], list[float]]:
+    """The step s = d·ŝ kept strictly inside the box, and ŝ to match: a component that would
+    cross its bound goes a fraction θ of the way there (`lower_room`, `upper_room`), the others
+    keep their full length (a projected step; scaling the whole step would stall the free
+    coordinates at a bound)."""
+    n = len(s_h)
+    s = [d[i] * s_h[i] for i in range(n)]
+    for i in range(n):
+        if s[i] > upper_room[i] or s[i] < lower_room[i]:
+            s = [min(max(s[k], lower_room[k]), upper_room[k]) for k in range(n)]
+            return s, [s[k] / d[k] for k in range(n)]
+    return s, s_h
+
+
 def solve_normal(
     fun: NormalFunction,
     x0: np.ndarray,
@@ -220,28 +267,7 @@ def solve_normal(
     diagonal = (np.arange(n), np.arange(n))
     while iterations < max_iterations:
         xl, gl = x.tolist(), g.tolist()
-        d, g_h, g_dv = [0.0] * n, [0.0] * n, [0.0] * n
-        gv_max = gh_max = 0.0
-        nan = False
-        for i in range(n):
-            gi, xi = gl[i], xl[i]
-            if gi > 0 and fin_lbl[i]:
-                vi = xi - lbl[i]
-                g_dv[i] = gi
-            elif gi < 0 and fin_ubl[i]:
-                vi = ubl[i] - xi
-                g_dv[i] = -gi
-            else:
-                vi = 1.0
-            gv = abs(gi * vi)
-            nan = nan or gv != gv
-            gv_max = gv if gv > gv_max else gv_max
-            di = sqrt(vi) if vi > 0 else 0.0
-            d[i] = di
-            ghi = di * gi
-            g_h[i] = ghi
-            ghi = abs(ghi)
-            gh_max = ghi if ghi > gh_max else gh_max
+        d, g_h, g_dv, gv_max, gh_max, nan = _scaled_gradient(xl, gl, lbl, ubl, fin_lbl, fin_ubl)
         if not nan and gv_max < gtol:
             converged = True
             break
@@ -258,16 +284,7 @@ def solve_normal(
         lower_room = [theta * (lbl[i] - xl[i]) for i in range(n)]
         # Inner loop: shrink the radius until a step decreases the cost.
         for _attempt in range(max_rejections):
-            s_h = _subproblem(eig, radius).tolist()
-            s = [d[i] * s_h[i] for i in range(n)]
-            # Stay strictly inside the box: a component that would cross its bound goes a
-            # fraction θ of the way there, the others keep their full length (a projected
-            # step; scaling the whole step would stall the free coordinates at a bound).
-            for i in range(n):
-                if s[i] > upper_room[i] or s[i] < lower_room[i]:
-                    s = [min(max(s[k], lower_room[k]), upper_room[k]) for k in range(n)]
-                    s_h = [s[k] / d[k] for k in range(n)]
-                    break
+            s, s_h = _step_inside(_subproblem(eig, radius).tolist(), d, lower_room, upper_room)
             s_arr = np.array(s_h)
             predicted = -(sum(g_h[i] * s_h[i] for i in range(n)) + 0.5 * float(s_arr @ H @ s_arr))
             if predicted_ftol > 0 and predicted < predicted_ftol * cost:

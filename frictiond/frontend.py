@@ -427,7 +427,6 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         return self._on_trigger(time_s, history)
 
     def _on_trigger(self, time_s: float, history: _MessageHistory) -> FrontEndResult:
-        opts = self.options
         stale = self.stale_messages(time_s)
         values = history.merged
         # (the four wheels spelt out: this runs at the bus rate, and loops cost a frame each)
@@ -440,7 +439,17 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
             self._wheel_times.clear()
             self._wheel_speeds.clear()
             return FrontEndResult(None, stale, "wheel speed out of range")
+        self._push_wheel_speeds(time_s, speeds)
+        if len(self._wheel_times) < self.derivative_window:
+            return FrontEndResult(None, stale, None)
+        return self._sample_at(time_s, stale)
 
+    def _push_wheel_speeds(self, time_s: float, speeds: tuple[float, float, float, float]) -> None:
+        """The wheel speeds of a trigger frame into the derivative window: counted as repeats
+        (a stuck sensor), timed (the trigger's measured cycle), the window restarted after a
+        gap or a jump back in time."""
+        opts = self.options
+        fl, fr, rl, rr = speeds
         # A sensor that repeats exactly the same reading frame after frame while the car
         # changes speed is stuck (quantised noise makes exact repeats rare on a live sensor).
         repeats, previous = self._repeats, self._previous_speeds
@@ -463,8 +472,10 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         self._last_trigger_s = time_s
         self._wheel_times.append(time_s)
         self._wheel_speeds.append(speeds)  # type: ignore[arg-type]
-        if len(self._wheel_times) < self.derivative_window:
-            return FrontEndResult(None, stale, None)
+
+    def _sample_at(self, time_s: float, stale: tuple[str, ...]) -> FrontEndResult:
+        """The sample of a full derivative window: a persistent fault or stale inputs give none;
+        inputs in doubt give a suspect one (`_suspect_sample`), the rest `_compute_sample`'s."""
         fault = self._persistent_fault()
         if fault is not None:
             return FrontEndResult(None, (), fault)

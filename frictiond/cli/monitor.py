@@ -8,6 +8,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from .common import (EXIT_CONFIG, EXIT_DATA_ERROR, EXIT_NO_INPUT, EXIT_UNAVAILABLE, add_config_argument, fail,
                      load_config_or_exit)
@@ -52,7 +53,7 @@ def _do_monitor(args: argparse.Namespace) -> int:
 
     from ..codec import validate_against_dbc
     from ..config import ConfigError
-    from ..monitor import BusSource, LogSource, MonitorModel
+    from ..monitor import MonitorModel
 
     config = load_config_or_exit(args.config, check_dbc=False)
     try:
@@ -70,38 +71,11 @@ def _do_monitor(args: argparse.Namespace) -> int:
         except ImportError as exc:
             return fail(f"monitor: no curses on this system ({exc}); use --json", EXIT_UNAVAILABLE)
 
-    bus = None
-    if args.log:
-        from ..busio import LogFormatError, read_log
-
-        path = Path(args.log)
-        if not path.is_file():
-            return fail(f"{path}: no such log file", EXIT_NO_INPUT)
-        try:
-            frames = read_log(path)
-            first = list(itertools.islice(frames, 1))
-        except LogFormatError as exc:
-            return fail(str(exc), EXIT_DATA_ERROR)
-        except (OSError, ValueError) as exc:
-            return fail(f"{path}: cannot read log: {exc}", EXIT_DATA_ERROR)
-        pace = " (max speed)" if speed == 0 else "" if speed == 1 else f" ×{speed:g}"
-        source = LogSource(itertools.chain(first, frames), speed, description=f"log {path.name}{pace}")
-        waiting_on = f"log {path}"
-    else:
-        from ..busio import message_to_frame, open_bus
-
-        interface = args.interface or config.can.interface
-        channel = args.channel or config.can.channel
-        ids = set(input_codec.input_ids) | {output_codec.estimate_id, output_codec.wheel_id}
-        kwargs = {}
-        if config.can.bitrate and interface not in ("socketcan", "virtual"):
-            kwargs["bitrate"] = config.can.bitrate
-        try:
-            bus = open_bus(interface, channel, ids, **kwargs)
-        except Exception as exc:  # python-can raises CanError, OSError, ValueError, ImportError...
-            return fail(f"cannot open {interface} channel {channel}: {exc}", EXIT_UNAVAILABLE)
-        source = BusSource(bus, message_to_frame, description=f"{interface} {channel}")
-        waiting_on = channel
+    opened = (_log_source(Path(args.log), speed) if args.log
+              else _bus_source(args, config, input_codec, output_codec))
+    if isinstance(opened, int):
+        return opened
+    source, waiting_on, bus = opened
 
     try:
         if args.json:
@@ -115,6 +89,43 @@ def _do_monitor(args: argparse.Namespace) -> int:
                 bus.shutdown()
             except Exception:
                 pass
+
+
+def _log_source(path: Path, speed: float) -> tuple | int:
+    """(the log's frames at `speed`, what the view waits on, no bus), or an exit code."""
+    from ..busio import LogFormatError, read_log
+    from ..monitor import LogSource
+
+    if not path.is_file():
+        return fail(f"{path}: no such log file", EXIT_NO_INPUT)
+    try:
+        frames = read_log(path)
+        first = list(itertools.islice(frames, 1))
+    except LogFormatError as exc:
+        return fail(str(exc), EXIT_DATA_ERROR)
+    except (OSError, ValueError) as exc:
+        return fail(f"{path}: cannot read log: {exc}", EXIT_DATA_ERROR)
+    pace = " (max speed)" if speed == 0 else "" if speed == 1 else f" ×{speed:g}"
+    source = LogSource(itertools.chain(first, frames), speed, description=f"log {path.name}{pace}")
+    return source, f"log {path}", None
+
+
+def _bus_source(args: argparse.Namespace, config: Any, input_codec: Any, output_codec: Any) -> tuple | int:
+    """(the bus's frames, what the view waits on, the bus to shut down), or an exit code."""
+    from ..busio import message_to_frame, open_bus
+    from ..monitor import BusSource
+
+    interface = args.interface or config.can.interface
+    channel = args.channel or config.can.channel
+    ids = set(input_codec.input_ids) | {output_codec.estimate_id, output_codec.wheel_id}
+    kwargs = {}
+    if config.can.bitrate and interface not in ("socketcan", "virtual"):
+        kwargs["bitrate"] = config.can.bitrate
+    try:
+        bus = open_bus(interface, channel, ids, **kwargs)
+    except Exception as exc:  # python-can raises CanError, OSError, ValueError, ImportError...
+        return fail(f"cannot open {interface} channel {channel}: {exc}", EXIT_UNAVAILABLE)
+    return BusSource(bus, message_to_frame, description=f"{interface} {channel}"), channel, bus
 
 
 def _run_json(model, source) -> int:

@@ -163,7 +163,7 @@ def test_a_replay_says_when_no_wheel_torque_is_known_under_abs():
     for master_only in (True, False):
         stop = simulate_stop(dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, master_only=master_only)))
         summary = replay_frames(Pipeline(stop.config("lugre-tr")), stop.frames)
-        seconds[master_only] = summary.stats.unmeasured[WHEEL_TORQUES_UNKNOWN] * summary.trigger_period_s
+        seconds[master_only] = summary.stats.unmeasured[WHEEL_TORQUES_UNKNOWN] * summary.update_period_s
         truths[master_only] = stop.truth
         assert ("no wheel μ" in summary.format()) == master_only
     braking = [r["time_s"] for r in truths[True] if r["braking"] > 0.5]   # (the car then stands braked)

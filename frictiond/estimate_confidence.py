@@ -21,6 +21,8 @@ _IN_TRACK = {a: b for side in (LEFT_WHEELS, RIGHT_WHEELS) for a, b in (side, sid
 # Bands of slip, as multiples of a wheel's fitted peak slip, in which `_excess_over_fit` averages
 # the data's excess over the fitted curve: narrow around the peak, wider past it.
 _MISFIT_SLIP_BANDS = np.array([0.5, 0.75, 0.9, 1.1, 1.4, 2.0, 3.0])
+# The bands of `_band_ratio_of`, the same multiples around the peak.
+_BAND_FLOOR_SLIPS = np.array([0.75, 0.9, 1.1, 1.4, 2.0])
 
 
 def _data_peaks_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, k: int, min_samples: int,
@@ -76,6 +78,33 @@ class EstimateConfidence:
                                         o.measured_peak_margin)
         return _data_peaks_numpy(w.slip[lo:w.end], w.mu[lo:w.end], w.wheel[lo:w.end], k, self._min_wheel_samples,
                                  o.measured_peak_margin)
+
+    def _band_ratio_of(self, wheel_mu: Sequence[float], wheel_lam: Sequence[float]) -> float:
+        """The highest mean, over a band of slips around the wheels' fitted peaks, of the window's
+        samples' μ each over its wheel's fitted peak; 0 without such a band of `misfit_bin_samples`
+        samples, or early in a stop (as `_data_peaks`).
+
+        A band's mean is the grip the tyres gave over those slips, averaged over many samples and
+        the window's ABS cycles: their peak is at least that. Where the static curve rounds off a
+        sharp peak (a Magic Formula tyre falling 20–55 % past it) the band at the peak lies above
+        the fitted peak on every cycle, while no single group of neighbours stands out of the noise
+        (`_data_peaks`). The bands reach from 0.75 to 2 times the fitted peak slip: a rounded
+        peak's fit puts λ* off the tyre's, either side. The whole window, not its newest samples:
+        a change of road detected drops the older samples (`_detect_jump`).
+        """
+        o = self.options
+        w = self._window
+        if len(w) < o.misfit_bin_samples or self._last_sample_s - self._event_start_s < o.measured_peak_settle_s:
+            return 0.0
+        lo, hi = w.start, w.end
+        wheel = w.wheel[lo:hi].astype(np.intp)
+        fitted = np.maximum(np.asarray(wheel_mu, dtype=float), 1e-3)[wheel]
+        at = w.slip[lo:hi] / np.maximum(np.asarray(wheel_lam, dtype=float), 1e-3)[wheel]
+        band = np.searchsorted(_BAND_FLOOR_SLIPS, at, side="right")
+        counts = np.bincount(band, minlength=len(_BAND_FLOOR_SLIPS) + 1)[1:-1]
+        sums = np.bincount(band, weights=w.mu[lo:hi] / fitted, minlength=len(_BAND_FLOOR_SLIPS) + 1)[1:-1]
+        full = counts >= o.misfit_bin_samples
+        return float((sums[full] / counts[full]).max()) if full.any() else 0.0
 
     def _body_floor(self, now_s: float) -> float:
         """The least μ_max the car's own deceleration allows: the highest utilisation it showed

@@ -39,6 +39,7 @@ class EstimateReport:
         if self._due(0) or self._slip_support is None:
             self._slip_floor, self._slip_support = self._slip_range(weights)
             self._measured_peaks = self._data_peaks()
+            self._band_ratio = self._band_ratio_of(wheel_mu, wheel_lam) if o.band_floor else 0.0
         # Variance factor from the data residuals (≥ 1: never more confident than assumed noise).
         dof = max(w_sum - len(x), 1.0)
         variance_factor = max(1.0, residual_ss / dof)
@@ -63,6 +64,7 @@ class EstimateReport:
             self._excitation_cache = self._excitation(weights, wheel_mu, wheel_lam, v_eval)
             self._data_above_fit = self._excess_over_fit(fitted_mu, wheel_mu, wheel_lam)
         excitation = self._excitation_cache
+        wheel_mu, mu_max = self._lifted_to_bands(fitted_mu, wheel_mu, mu_max)
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(theta_list) / N_WHEELS
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(samples),
@@ -165,6 +167,17 @@ class EstimateReport:
             wheel_mu = tuple(m * lift for m in wheel_mu)
             mu_max = floor
         return wheel_mu, mu_max
+
+    def _lifted_to_bands(self, fitted_mu: tuple, wheel_mu: tuple, mu_max: float) -> tuple[tuple, float]:
+        """The wheels' peaks raised to the grip a band of their slips gave on average
+        (`_band_ratio_of`). After the excitation and the data's excess over the curve have been
+        read: the excess is the static curve's misfit, and a floor raised towards the data does not
+        make the curve fit (the band's mean lies below a sharp peak), so it must not answer it."""
+        ratio = self._band_ratio
+        if ratio <= 1.0 or self._innovation_score > self.options.jump_threshold:
+            return wheel_mu, mu_max
+        wheel_mu = tuple(max(m, f * ratio) for m, f in zip(wheel_mu, fitted_mu))
+        return wheel_mu, max(mu_max, sum(share * m for share, m in zip(self._load_share, wheel_mu)))
 
     def _restate(self, last: FrictionEstimate, now_s: float) -> FrictionEstimate:
         """The last (CONVERGING) fit again, at a cycle without usable samples.

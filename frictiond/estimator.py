@@ -152,6 +152,7 @@ class LugreTROptions:
     peak_group_samples: int = 6           # μ_max is never below a wheel's mean μ over this many neighbouring slips
     measured_peak_margin: float = 0.05    # ... less this share (the axles' brake-gain split), ...
     measured_peak_settle_s: float = 0.5   # ... from this long into a stop (the brake gain corrected)
+    band_floor: bool = True               # ... nor below the wheels' mean μ over a band of slips around their peaks
     body_floor_window_s: float = 0.3      # μ_max is never below the car's utilisation of the last this long ...
     body_floor_smoothing_s: float = 0.05  # ... averaged over this (the accelerometer's noise)
     body_floor_margin: float = 0.03       # ... less this (offset, pitch) ...
@@ -494,6 +495,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
+        self._band_ratio = 0.0
         self._event_start_s = -math.inf
         self._last_fit_s = -math.inf
         self._last_update_s: float | None = None

@@ -100,6 +100,7 @@ class WindowFit:
             self._mu_history.clear()
             self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
             self._measured_peaks = [0.0] * N_WHEELS
+            self._band_ratio = 0.0
             # (The peaks the wheels showed were the old road's.)
             self._wheel_shown_s = [-math.inf] * N_WHEELS
             self._shape_showed_peak = [False] * N_WHEELS

@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 
 from frictiond import tyre_model as tm
 from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
@@ -45,12 +46,33 @@ def test_a_sharp_peak_is_not_published_far_below_what_the_wheels_measured():
         return [(e.mu_max - peak) / peak for t, e, peak in overshooting_abs(options)
                 if e.status in statuses and t > 0.6]
 
-    bound_off = dataclasses.replace(LugreTROptions(), peak_group_samples=1)
+    bound_off = dataclasses.replace(LugreTROptions(), peak_group_samples=1, band_floor=False)
     rounded = errors(bound_off, (Status.VALID, Status.CONVERGING))
     assert np.mean(rounded) < -0.15          # the static model alone: ~20 % low ...
     assert not [x for x in errors(bound_off) if x < -0.2]   # ... and, with the data above its curve, not VALID
     bounded = errors(LugreTROptions(), (Status.VALID, Status.CONVERGING))
     assert np.mean(bounded) > -0.12 and max(bounded) < 0.02   # lifted towards the data, never above the peak
+
+
+def test_a_band_of_slips_around_the_peak_lifts_it_but_does_not_answer_the_misfit():
+    # Over several ABS cycles the samples within 0.75–2 × the fitted peak slip average above the
+    # rounded fit's peak: no tyre gives less than that. The band's mean lies below a sharp peak,
+    # so the data's excess over the curve still costs confidence as without the lift.
+    def run(options):
+        return [(e, peak) for t, e, peak in overshooting_abs(options) if t > 0.6
+                and e.status in (Status.VALID, Status.CONVERGING)]
+
+    no_floor = dataclasses.replace(LugreTROptions(), peak_group_samples=1, band_floor=False)
+    band_only = dataclasses.replace(no_floor, band_floor=True)
+    rounded, lifted = run(no_floor), run(band_only)
+    errors = [(e.mu_max - peak) / peak for e, peak in lifted]
+    assert np.mean([(e.mu_max - peak) / peak for e, peak in rounded]) < -0.15
+    assert np.mean(errors) > -0.05 and max(errors) < 0.01
+    excess = [e.detail["data_above_fit"] for e, _ in lifted if e.detail]
+    assert np.median(excess) > 0.15
+    assert np.median(excess) == pytest.approx(np.median([e.detail["data_above_fit"] for e, _ in rounded if e.detail]),
+                                              abs=0.01)
+    assert not [e for e, _ in lifted if e.status == Status.VALID]
 
 
 def test_data_above_the_fitted_curve_cost_confidence():

@@ -1043,6 +1043,93 @@ static Py_ssize_t get_slip_mu_wheel(PyObject *o_slip, PyObject *o_mu, PyObject *
     return cap;
 }
 
+/* Up to `cap` floats of a sequence into `out`; their number, or -1 with an exception. */
+static Py_ssize_t float_seq(PyObject *seq, double *out, Py_ssize_t cap, const char *what)
+{
+    PyObject *fast = PySequence_Fast(seq, what);
+    if (!fast)
+        return -1;
+    const Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
+    if (n > cap) {
+        PyErr_Format(PyExc_ValueError, "%s: at most %zd values", what, cap);
+        Py_DECREF(fast);
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < n; i++)
+        out[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fast, i));
+    Py_DECREF(fast);
+    return PyErr_Occurred() ? -1 : n;
+}
+
+/* EstimateConfidence._band_ratio_of over the window's samples [lo, hi): per band of slips (as
+   multiples of each wheel's peak slip, between consecutive edges), the mean of μ over the wheel's
+   peak μ; the highest of the bands with min_n samples or more, 0 without any. The same sums in
+   the same order as numpy's bincount. */
+static PyObject *py_band_ratio(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_slip, *o_mu, *o_wheel, *o_peak_mu, *o_peak_slip, *o_edges;
+    Py_ssize_t lo, hi, min_n;
+    if (!PyArg_ParseTuple(args, "OOOnnOOOn:band_ratio", &o_slip, &o_mu, &o_wheel, &lo, &hi, &o_peak_mu, &o_peak_slip,
+                          &o_edges, &min_n))
+        return NULL;
+    double peak_mu[NW], peak_slip[NW], edges[16];
+    if (float_seq(o_peak_mu, peak_mu, NW, "band_ratio: peak mu") != NW
+        || float_seq(o_peak_slip, peak_slip, NW, "band_ratio: peak slip") != NW) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "band_ratio: one peak per wheel");
+        return NULL;
+    }
+    const Py_ssize_t n_edges = float_seq(o_edges, edges, 16, "band_ratio: edges");
+    if (n_edges < 0)
+        return NULL;
+    Buf b[3];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    const Py_ssize_t cap = get_slip_mu_wheel(o_slip, o_mu, o_wheel, b);
+    if (cap < 0)
+        goto out;
+    if (lo < 0 || hi < lo || hi > cap) {
+        PyErr_SetString(PyExc_ValueError, "band_ratio: lo, hi outside the window");
+        goto out;
+    }
+    const double *slip = b[0].view.buf, *mu = b[1].view.buf;
+    const Py_ssize_t *wheel = b[2].view.buf;
+    for (int w = 0; w < NW; w++) {
+        peak_mu[w] = py_max(peak_mu[w], 1e-3);
+        peak_slip[w] = py_max(peak_slip[w], 1e-3);
+    }
+    double sums[17] = {0.0};
+    Py_ssize_t counts[17] = {0};
+    for (Py_ssize_t j = lo; j < hi; j++) {
+        const Py_ssize_t w = wheel[j];
+        if (w < 0 || w >= NW)
+            continue;
+        const double at = slip[j] / peak_slip[w];
+        Py_ssize_t band = 0;
+        if (isnan(at))
+            band = n_edges;   /* (numpy's searchsorted puts NaN past every edge) */
+        else
+            while (band < n_edges && edges[band] <= at)
+                band++;
+        sums[band] += mu[j] / peak_mu[w];
+        counts[band]++;
+    }
+    double best = 0.0;
+    int found = 0;
+    for (Py_ssize_t k = 1; k < n_edges; k++)
+        if (counts[k] >= min_n) {
+            const double mean = sums[k] / (double)counts[k];
+            if (!found || mean > best)
+                best = mean;
+            found = 1;
+        }
+    result = PyFloat_FromDouble(found ? best : 0.0);
+out:
+    release_all(b, 3);
+    return result;
+}
+
 static PyObject *py_data_peaks(PyObject *self, PyObject *args)
 {
     (void)self;
@@ -1815,6 +1902,9 @@ static PyMethodDef methods[] = {
     {"wheel_stats", py_wheel_stats, METH_VARARGS,
      "wheel_stats(slip, mu, wheel, times, lag, elasticity) -> 4 tuples of 12 floats\n\n"
      "estimator._wheel_stats_numpy: n, q10, q90, lam_lo, lam_hi, mu_hi, run-away rate, s2, s3, s4, y1, y2."},
+    {"band_ratio", py_band_ratio, METH_VARARGS,
+     "band_ratio(slip, mu, wheel, lo, hi, peak_mu, peak_slip, edges, min_n) -> float\n\n"
+     "EstimateConfidence._band_ratio_of's band means over the window's samples [lo, hi)."},
     {"data_peaks", py_data_peaks, METH_VARARGS,
      "data_peaks(slip, mu, wheel, lo, hi, k, min_n, margin) -> [4 floats]\n\n"
      "estimator._data_peaks's group statistics over the window's samples [lo, hi)."},

@@ -23,6 +23,7 @@ _IN_TRACK = {a: b for side in (LEFT_WHEELS, RIGHT_WHEELS) for a, b in (side, sid
 _MISFIT_SLIP_BANDS = np.array([0.5, 0.75, 0.9, 1.1, 1.4, 2.0, 3.0])
 # The bands of `_band_ratio_of`, the same multiples around the peak.
 _BAND_FLOOR_SLIPS = np.array([0.75, 0.9, 1.1, 1.4, 2.0])
+_BAND_FLOOR_EDGES = tuple(_BAND_FLOOR_SLIPS.tolist())
 
 
 def _data_peaks_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, k: int, min_samples: int,
@@ -49,6 +50,20 @@ def _data_peaks_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, k: in
             out[i] = max(0.0, float(lower[first:first + u // k].max()) * (1.0 - margin))
             first += u // k
     return out
+
+
+def _band_ratio_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, peak_mu: Sequence[float],
+                      peak_slip: Sequence[float], min_samples: int) -> float:
+    """`EstimateConfidence._band_ratio_of`'s band means on the samples given; `_fitcore.band_ratio`
+    is the same, compiled."""
+    wheel = wheel.astype(np.intp)
+    fitted = np.maximum(np.asarray(peak_mu, dtype=float), 1e-3)[wheel]
+    at = slip / np.maximum(np.asarray(peak_slip, dtype=float), 1e-3)[wheel]
+    band = np.searchsorted(_BAND_FLOOR_SLIPS, at, side="right")
+    counts = np.bincount(band, minlength=len(_BAND_FLOOR_SLIPS) + 1)[1:-1]
+    sums = np.bincount(band, weights=mu / fitted, minlength=len(_BAND_FLOOR_SLIPS) + 1)[1:-1]
+    full = counts >= min_samples
+    return float((sums[full] / counts[full]).max()) if full.any() else 0.0
 
 
 class EstimateConfidence:
@@ -97,14 +112,10 @@ class EstimateConfidence:
         if len(w) < o.misfit_bin_samples or self._last_sample_s - self._event_start_s < o.measured_peak_settle_s:
             return 0.0
         lo, hi = w.start, w.end
-        wheel = w.wheel[lo:hi].astype(np.intp)
-        fitted = np.maximum(np.asarray(wheel_mu, dtype=float), 1e-3)[wheel]
-        at = w.slip[lo:hi] / np.maximum(np.asarray(wheel_lam, dtype=float), 1e-3)[wheel]
-        band = np.searchsorted(_BAND_FLOOR_SLIPS, at, side="right")
-        counts = np.bincount(band, minlength=len(_BAND_FLOOR_SLIPS) + 1)[1:-1]
-        sums = np.bincount(band, weights=w.mu[lo:hi] / fitted, minlength=len(_BAND_FLOOR_SLIPS) + 1)[1:-1]
-        full = counts >= o.misfit_bin_samples
-        return float((sums[full] / counts[full]).max()) if full.any() else 0.0
+        if self.core is not None:
+            return self.core.band_ratio(w.slip, w.mu, w.wheel, lo, hi, wheel_mu, wheel_lam, _BAND_FLOOR_EDGES,
+                                        o.misfit_bin_samples)
+        return _band_ratio_numpy(w.slip[lo:hi], w.mu[lo:hi], w.wheel[lo:hi], wheel_mu, wheel_lam, o.misfit_bin_samples)
 
     def _body_floor(self, now_s: float) -> float:
         """The least μ_max the car's own deceleration allows: the highest utilisation it showed

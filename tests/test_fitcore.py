@@ -599,6 +599,25 @@ def test_data_peaks_compiled_equals_numpy():
         assert got == pytest.approx(want, abs=1e-12), (trial, got, want)
 
 
+def test_band_ratio_compiled_equals_numpy():
+    # Random windows, peaks per wheel that put the slips in every band and outside them, peaks at
+    # the 1e-3 floor, some bands short of samples.
+    from frictiond.estimate_confidence import _BAND_FLOOR_EDGES, _band_ratio_numpy
+
+    rng = np.random.default_rng(13)
+    found = 0
+    for trial in range(500):
+        lo, n, slip, mu, wheel = _random_window(rng, 512, 300, 3)
+        peak_mu = (rng.random(4) * 1.2).tolist()
+        peak_slip = (rng.random(4) * (0.3 if trial % 5 else 0.0005)).tolist()
+        min_n = int(rng.integers(1, 30))
+        got = core.band_ratio(slip, mu, wheel, lo, lo + n, peak_mu, peak_slip, _BAND_FLOOR_EDGES, min_n)
+        want = _band_ratio_numpy(slip[lo:lo + n], mu[lo:lo + n], wheel[lo:lo + n], peak_mu, peak_slip, min_n)
+        assert got == want, (trial, got, want)
+        found += got > 0
+    assert found > 200   # (most windows have a full band: the comparison is not of zeros)
+
+
 def test_top_elasticity_compiled_equals_numpy():
     # Random windows: some wheels with too few samples, slips with ties (a quantile on a tie),
     # since before, inside and after the window.

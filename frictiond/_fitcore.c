@@ -1043,24 +1043,6 @@ static Py_ssize_t get_slip_mu_wheel(PyObject *o_slip, PyObject *o_mu, PyObject *
     return cap;
 }
 
-/* Up to `cap` floats of a sequence into `out`; their number, or -1 with an exception. */
-static Py_ssize_t float_seq(PyObject *seq, double *out, Py_ssize_t cap, const char *what)
-{
-    PyObject *fast = PySequence_Fast(seq, what);
-    if (!fast)
-        return -1;
-    const Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
-    if (n > cap) {
-        PyErr_Format(PyExc_ValueError, "%s: at most %zd values", what, cap);
-        Py_DECREF(fast);
-        return -1;
-    }
-    for (Py_ssize_t i = 0; i < n; i++)
-        out[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fast, i));
-    Py_DECREF(fast);
-    return PyErr_Occurred() ? -1 : n;
-}
-
 /* EstimateConfidence._band_ratio_of over the window's samples [lo, hi): per band of slips (as
    multiples of each wheel's peak slip, between consecutive edges), the mean of μ over the wheel's
    peak μ; the highest of the bands with min_n samples or more, 0 without any. The same sums in
@@ -1073,14 +1055,13 @@ static PyObject *py_band_ratio(PyObject *self, PyObject *args)
     if (!PyArg_ParseTuple(args, "OOOnnOOOn:band_ratio", &o_slip, &o_mu, &o_wheel, &lo, &hi, &o_peak_mu, &o_peak_slip,
                           &o_edges, &min_n))
         return NULL;
-    double peak_mu[NW], peak_slip[NW], edges[16];
-    if (float_seq(o_peak_mu, peak_mu, NW, "band_ratio: peak mu") != NW
-        || float_seq(o_peak_slip, peak_slip, NW, "band_ratio: peak slip") != NW) {
+    double peak_mu[MAX_POINTS], peak_slip[MAX_POINTS], edges[MAX_POINTS];
+    if (floats(o_peak_mu, peak_mu, "peak_mu") != NW || floats(o_peak_slip, peak_slip, "peak_slip") != NW) {
         if (!PyErr_Occurred())
             PyErr_SetString(PyExc_ValueError, "band_ratio: one peak per wheel");
         return NULL;
     }
-    const Py_ssize_t n_edges = float_seq(o_edges, edges, 16, "band_ratio: edges");
+    const Py_ssize_t n_edges = floats(o_edges, edges, "edges");
     if (n_edges < 0)
         return NULL;
     Buf b[3];
@@ -1099,8 +1080,8 @@ static PyObject *py_band_ratio(PyObject *self, PyObject *args)
         peak_mu[w] = py_max(peak_mu[w], 1e-3);
         peak_slip[w] = py_max(peak_slip[w], 1e-3);
     }
-    double sums[17] = {0.0};
-    Py_ssize_t counts[17] = {0};
+    double sums[MAX_POINTS + 1] = {0.0};
+    Py_ssize_t counts[MAX_POINTS + 1] = {0};
     for (Py_ssize_t j = lo; j < hi; j++) {
         const Py_ssize_t w = wheel[j];
         if (w < 0 || w >= NW)

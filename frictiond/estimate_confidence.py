@@ -21,8 +21,8 @@ _IN_TRACK = {a: b for side in (LEFT_WHEELS, RIGHT_WHEELS) for a, b in (side, sid
 # Bands of slip, as multiples of a wheel's fitted peak slip, in which `_excess_over_fit` averages
 # the data's excess over the fitted curve: narrow around the peak, wider past it.
 _MISFIT_SLIP_BANDS = np.array([0.5, 0.75, 0.9, 1.1, 1.4, 2.0, 3.0])
-# The bands of `_band_ratio_of`, the same multiples around the peak.
-_BAND_FLOOR_SLIPS = np.array([0.75, 0.9, 1.1, 1.4, 2.0])
+# The bands of `_band_ratio_of`: those of them from 0.75 to 2 times the peak slip.
+_BAND_FLOOR_SLIPS = _MISFIT_SLIP_BANDS[1:6]
 _BAND_FLOOR_EDGES = tuple(_BAND_FLOOR_SLIPS.tolist())
 
 

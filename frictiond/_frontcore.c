@@ -479,7 +479,7 @@ enum {
     K_MAX_ALL_WHEEL_SLIP, K_SAMPLE_PERIOD, K_BIAS_TAU, K_MASS, K_CG_HEIGHT, K_CG_FRONT, K_CG_REAR, K_TRACK_FRONT,
     K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
     K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_MASTER_ONLY, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
-    K_LAG_COMPENSATION, K_COUNT
+    K_LAG_COMPENSATION, K_BIAS_SETTLE, K_COUNT
 };
 
 #define MAX_ABS_ACCEL 30.0
@@ -487,6 +487,7 @@ enum {
 #define MAX_SPEED 120.0
 #define FREE_ROLLING_SPREAD 0.04
 #define FREE_ROLLING_ACCEL 2.0
+#define SETTLE_SLIP 0.01
 #define BRAKE_MODEL_MARGIN 1.25
 #define BRAKE_MODEL_WINDOW 0.2
 #define LOCKED_WHEEL_RATIO 0.05
@@ -510,7 +511,7 @@ enum {
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released,
-    *A_unjudged, *A_lag_state;
+    *A_unjudged, *A_lag_state, *A_slipping_time;
 
 typedef struct {
     long repeats[NW];
@@ -518,7 +519,7 @@ typedef struct {
     int has_low_since[NW];
     double low_since[NW], low_unbraked[NW];
     int has_last_sample, has_speed_time, has_speed_est;
-    double last_sample, bias, unexplained, speed_time, speed_est;
+    double last_sample, bias, unexplained, speed_time, speed_est, slipping_time;
     long bias_samples, ref_disagreements;
     double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
     double unjudged;
@@ -601,6 +602,7 @@ static int load_state(PyObject *fe, FEState *s)
     }
     if (get_float_attr(fe, A_last_sample, &s->last_sample, &s->has_last_sample) < 0
         || get_float_attr(fe, A_bias, &s->bias, NULL) < 0 || get_long_attr(fe, A_bias_samples, &s->bias_samples) < 0
+        || get_float_attr(fe, A_slipping_time, &s->slipping_time, NULL) < 0
         || get_float_attr(fe, A_unexplained, &s->unexplained, NULL) < 0
         || get_float_attr(fe, A_speed_time, &s->speed_time, &s->has_speed_time) < 0
         || get_float_attr(fe, A_speed_est, &s->speed_est, &s->has_speed_est) < 0
@@ -675,6 +677,7 @@ static int store_state(PyObject *fe, const FEState *s)
     if (set_attr_new(fe, A_last_sample, float_or_none(s->has_last_sample, s->last_sample)) < 0
         || set_attr_new(fe, A_bias, PyFloat_FromDouble(s->bias)) < 0
         || set_attr_new(fe, A_bias_samples, PyLong_FromLong(s->bias_samples)) < 0
+        || set_attr_new(fe, A_slipping_time, PyFloat_FromDouble(s->slipping_time)) < 0
         || set_attr_new(fe, A_unexplained, PyFloat_FromDouble(s->unexplained)) < 0
         || set_attr_new(fe, A_speed_time, float_or_none(s->has_speed_time, s->speed_time)) < 0
         || set_attr_new(fe, A_speed_est, float_or_none(s->has_speed_est, s->speed_est)) < 0
@@ -1081,7 +1084,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         free_rolling = fabs(radius * omega_dot[i] - accel_long) < FREE_ROLLING_ACCEL;
     int from_ref;
     const double speed = update_speed(&s, k, t_c, wl, accel_long, !free_rolling, has_ref, ref, ref_fresh, &from_ref);
-    if (free_rolling) {
+    if (free_rolling && t_c - s.slipping_time >= k[K_BIAS_SETTLE]) {
         /* FrontEnd._learn_accel_bias */
         const double wheel_accel = radius * (sum_of(omega_dot, NW) / NW);
         double alpha = py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_BIAS_TAU], 1e-3));
@@ -1161,6 +1164,8 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         const int ok = speed >= k[K_MIN_SPEED] && fabs(slip) <= k[K_MAX_SLIP]
                        && (braked[i] || (has_drive && fabs(drive[i]) > 20.0)) && load > 50.0 && !glitch && !stuck[i]
                        && !dead[i] && isfinite(mu) && s.model_holds && !s.released;
+        if (braked[i] && slip > SETTLE_SLIP)
+            s.slipping_time = t_c;
         slips[i] = slip;
         forces[i] = force;
         mus[i] = mu;
@@ -1213,6 +1218,7 @@ static int intern_attributes(void)
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
         {&A_model_holds, "_brake_model_holds"}, {&A_unjudged, "_unjudged_s"}, {&A_lag_state, "_lag_state"},
+        {&A_slipping_time, "_slipping_time_s"},
     };
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (!(*names[i].slot = PyUnicode_InternFromString(names[i].name)))

@@ -58,6 +58,7 @@ class BodyEquation:
         """What the body equation has learnt: nothing yet."""
         self._accel_bias_mps2 = 0.0
         self._accel_bias_samples = 0
+        self._slipping_time_s = -math.inf   # the newest sample with a braked wheel slipping
         self._brake_gain_factor = 1.0
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
         # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...

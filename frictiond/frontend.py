@@ -55,6 +55,7 @@ FREE_ROLLING_SPREAD = 0.04     # relative wheel-speed spread a curve can explain
 PRESSURE_ZERO_READINGS = 128   # free-rolling readings a pressure sensor's zero point is the median of
 PRESSURE_ZERO_AT_ZERO = 0.4    # ... and the share of them at 0 that says its zero point is 0
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
+SETTLE_SLIP = 0.01             # a braked wheel slipping more has a spin-up to settle (`accel_bias_settle_s`)
 MAX_PRESSURE_BAR = 350.0
 MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 BODY_WHEELS_TOLERANCE = 0.25   # the body's and the wheels' total force agree within this (pad friction ±20 %)
@@ -92,6 +93,11 @@ class FrontEndOptions:
     unexplained_decel: float = 1.5        # m/s^2 of deceleration that zero brake pressure cannot explain
     speed_gain_free_rolling: float = 0.15
     accel_bias_time_constant: float = 3.0   # s, accelerometer offset learning while free rolling
+    # Released wheels close their slip on the car's speed with a time constant J·v/(r²·C·F_z), up
+    # to ~0.3 s for a low-grip tyre at motorway speed: until a few of those have passed since a
+    # braked wheel last slipped (`SETTLE_SLIP`), their acceleration is not the car's and would
+    # teach the offset a spin-up.
+    accel_bias_settle_s: float = 1.0
     brake_gain_correction: bool = True
     brake_gain_time_constant: float = 2.0   # s
     brake_gain_min_decel: float = 0.25       # m/s^2 of deceleration before the body equation is used
@@ -118,6 +124,8 @@ class FrontEndOptions:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.max_slip < 1:
             raise ValueError(f"max_slip: must be in (0, 1), got {self.max_slip!r}")
+        if not self.accel_bias_settle_s >= 0:
+            raise ValueError(f"accel_bias_settle_s: must be ≥ 0, got {self.accel_bias_settle_s!r}")
 
 
 @dataclass(slots=True)
@@ -306,7 +314,8 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
             vehicle.wheel_inertia, options.brake_gain_correction, options.brake_gain_min_decel,
             vehicle.rolling_resistance, vehicle.drag_area_coefficient, options.brake_gain_limits,
             options.brake_gain_time_constant, options.max_slip, self._has_drive_torque, self._has_yaw_rate,
-            float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation))
+            float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation,
+            options.accel_bias_settle_s))
 
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
@@ -720,7 +729,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
                         and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
                         and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot))
         speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
-        if free_rolling:
+        if free_rolling and t_c - self._slipping_time_s >= opts.accel_bias_settle_s:
             self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
 
         yaw_rate = inputs[-1] if self._has_yaw_rate else None
@@ -765,6 +774,8 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
                 and self._brake_model_holds
                 and not self._brake_released
             )
+            if braked[i] and slip > SETTLE_SLIP:
+                self._slipping_time_s = t_c
             slips.append(slip)
             forces.append(force)
             mus.append(mu)

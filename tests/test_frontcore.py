@@ -178,7 +178,7 @@ PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_
                  "_accel_bias_samples", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
                  "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_model_holds", "_unjudged_s",
-                 "_lag_state")
+                 "_lag_state", "_slipping_time_s")
 
 
 def _physics_stream(seed: int, steps: int):

@@ -694,43 +694,17 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         stuck = [n >= opts.stuck_frames for n in self._repeats] if abs(accel_long_raw) > 0.5 else [False] * 4
         braked = [p - veh.brake_pushout_pressure > opts.min_brake_pressure for p in pressures]  # type: ignore[operator]
         dead = self._dead_wheels(t_c, wheel_linear, braked)
-        failed = [st or d for st, d in zip(stuck, dead)]
-        if any(failed) and not all(failed):
-            # Keep a stuck or dead sensor out of the speed estimate (a dead one's zero would drag
-            # the free-rolling observer, which pulls towards the wheels' mean, down by a quarter):
-            # the slowest working wheel stands in for it.
-            slowest_ok = min(w for w, f in zip(wheel_linear, failed) if not f)
-            wheel_linear = [slowest_ok if f else w for w, f in zip(wheel_linear, failed)]
+        wheel_linear = _stood_in_for([st or d for st, d in zip(stuck, dead)], wheel_linear)
         braking = any(braked)
         if not braking:
             self._brake_released = False    # (a new stop: the master pressure is the wheels' again)
         driving = self._has_drive_torque and any(abs(d) > 20.0 for d in drive)
 
         accel_long = accel_long_raw - self._accel_bias_mps2
-        # Plausibility of the brake pressures against the body: a hard deceleration with no
-        # pressure anywhere (and no drive torque to explain it) means the pressure signals are
-        # wrong, and every brake torque computed from them would be too. Unless the wheels are
-        # spinning back up: an ABS that released every wheel from deep slip at once leaves the
-        # road's force on them, J·ω̇/R each, braking the car for a few tenths of a second.
-        spin_up = veh.wheel_inertia * sum(a for a in omega_dot if a > 0.0) / (veh.wheel_radius * veh.mass)
-        if not braking and not driving and accel_long + spin_up < -opts.unexplained_decel:
-            self._unexplained_s += max(0.0, t_c - self._last_sample_time_s) if self._last_sample_time_s else 0.0
-        else:
-            self._unexplained_s = 0.0
-        self._last_sample_time_s = t_c
-        if self._unexplained_s > 0.1:
+        if self._deceleration_unexplained(t_c, braking or driving, accel_long, omega_dot):
             return FrontEndResult(None, stale, "brake pressure implausible")
-        # No pressure is not yet free rolling: wheels released by the ABS (pressure below the
-        # threshold on a low-μ road) may still be spinning back up from deep slip, all together.
-        # Only wheels that agree with each other (within what a curve explains) and accelerate
-        # with the body read the ground speed.
-        fastest = max(wheel_linear)
-        free_rolling = (not braking and not driving
-                        and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
-                        and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot))
-        speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
-        if free_rolling and t_c - self._slipping_time_s >= opts.accel_bias_settle_s:
-            self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
+        speed, from_ref = self._speed_and_offset(t_c, wheel_linear, omega_dot, accel_long, accel_long_raw,
+                                                 braking or driving)
 
         yaw_rate = inputs[-1] if self._has_yaw_rate else None
         if yaw_rate is None or not math.isfinite(yaw_rate):
@@ -750,36 +724,23 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         lag = self._lag_state[5]
         brake_torques = [max(b + lag * r, 0.0) for b, r in zip(brake_torques, brake_rates)]   # (NaN stays NaN)
 
-        slips = []
-        forces = []
-        mus = []
-        usable = []
-        for i, (side, half_track) in enumerate(self._wheel_offsets):
-            # Each wheel's own ground speed: in a turn the outer wheels travel faster.
-            ground = speed + side * yaw_rate * half_track
-            denom = max(ground, wheel_linear[i])
-            slip = (ground - wheel_linear[i]) / denom if denom > 0.1 else 0.0
-            force = (inertia_torques[i] + gain * brake_torques[i] - drive[i]) / radius
-            load = loads[i]
-            mu = force / load if load > 50.0 else 0.0
-            ok = (
-                speed >= opts.min_speed
-                and abs(slip) <= opts.max_slip
-                and (braked[i] or (self._has_drive_torque and abs(drive[i]) > 20.0))
-                and load > 50.0
-                and not glitch
-                and not stuck[i]
-                and not dead[i]
-                and math.isfinite(mu)
-                and self._brake_model_holds
-                and not self._brake_released
-            )
-            if braked[i] and slip > SETTLE_SLIP:
+        forces = [(inertia_torques[i] + gain * brake_torques[i] - drive[i]) / radius for i in range(4)]
+        mus = [force / load if load > 50.0 else 0.0 for force, load in zip(forces, loads)]
+        slips = self._slips(speed, yaw_rate, wheel_linear)
+        for i in range(4):
+            if braked[i] and slips[i] > SETTLE_SLIP:
                 self._slipping_time_s = t_c
-            slips.append(slip)
-            forces.append(force)
-            mus.append(mu)
-            usable.append(bool(ok))
+        good = (speed >= opts.min_speed and not glitch and self._brake_model_holds and not self._brake_released)
+        usable = [
+            good
+            and abs(slips[i]) <= opts.max_slip
+            and (braked[i] or (self._has_drive_torque and abs(drive[i]) > 20.0))
+            and loads[i] > 50.0
+            and not stuck[i]
+            and not dead[i]
+            and math.isfinite(mus[i])
+            for i in range(4)
+        ]
 
         sample = PhysicalSample(
             time_s=t_c,
@@ -796,6 +757,48 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
                  else None if self._brake_model_holds or not braking or speed < opts.min_speed
                  else "brake pressure disagrees with deceleration")
         return FrontEndResult(sample, stale, fault, tuple(i for i in range(4) if dead[i]))
+
+    def _deceleration_unexplained(self, t_c: float, torqued: bool, accel_long: float, omega_dot: list[float]) -> bool:
+        """Plausibility of the brake pressures against the body: a hard deceleration for 0.1 s with
+        no pressure anywhere (and no drive torque to explain it) means the pressure signals are
+        wrong, and every brake torque computed from them would be too. Unless the wheels are
+        spinning back up: an ABS that released every wheel from deep slip at once leaves the
+        road's force on them, J·ω̇/R each, braking the car for a few tenths of a second."""
+        veh = self.vehicle
+        spin_up = veh.wheel_inertia * sum(a for a in omega_dot if a > 0.0) / (veh.wheel_radius * veh.mass)
+        if not torqued and accel_long + spin_up < -self.options.unexplained_decel:
+            self._unexplained_s += max(0.0, t_c - self._last_sample_time_s) if self._last_sample_time_s else 0.0
+        else:
+            self._unexplained_s = 0.0
+        self._last_sample_time_s = t_c
+        return self._unexplained_s > 0.1
+
+    def _speed_and_offset(self, t_c: float, wheel_linear: list[float], omega_dot: list[float],
+                          accel_long: float, accel_long_raw: float, torqued: bool) -> tuple[float, bool]:
+        """The ground speed (and whether from the car's reference) after this sample; while the
+        wheels roll free, settled since their last braked slip, the accelerometer's offset learnt."""
+        # No pressure is not yet free rolling: wheels released by the ABS (pressure below the
+        # threshold on a low-μ road) may still be spinning back up from deep slip, all together.
+        # Only wheels that agree with each other (within what a curve explains) and accelerate
+        # with the body read the ground speed.
+        radius = self.vehicle.wheel_radius
+        fastest = max(wheel_linear)
+        free_rolling = (not torqued
+                        and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
+                        and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot))
+        speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
+        if free_rolling and t_c - self._slipping_time_s >= self.options.accel_bias_settle_s:
+            self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
+        return speed, from_ref
+
+    def _slips(self, speed: float, yaw_rate: float, wheel_linear: list[float]) -> list[float]:
+        """Each wheel's slip against its own ground speed: in a turn the outer wheels travel faster."""
+        slips = []
+        for i, (side, half_track) in enumerate(self._wheel_offsets):
+            ground = speed + side * yaw_rate * half_track
+            denom = max(ground, wheel_linear[i])
+            slips.append((ground - wheel_linear[i]) / denom if denom > 0.1 else 0.0)
+        return slips
 
     def _dead_wheels(self, time_s: float, wheel_linear: list[float], braked: list[bool]) -> list[bool]:
         """Wheels whose sensor reads (near) zero while the others say the car rolls on.
@@ -838,6 +841,16 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
 
 # Rejections of a trigger frame that give no output at all (its time is not the bus's).
 _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
+
+
+def _stood_in_for(failed: list[bool], wheel_linear: list[float]) -> list[float]:
+    """The wheels' speeds with the slowest working wheel standing in for a stuck or dead sensor:
+    a dead one's zero would drag the free-rolling observer, which pulls towards the wheels'
+    mean, down by a quarter. (All failed: nothing to stand in.)"""
+    if not any(failed) or all(failed):
+        return wheel_linear
+    slowest_ok = min(w for w, f in zip(wheel_linear, failed) if not f)
+    return [slowest_ok if f else w for w, f in zip(wheel_linear, failed)]
 
 
 def _input_label(signals: Iterable[str]) -> str:

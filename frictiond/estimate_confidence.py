@@ -59,11 +59,20 @@ def _band_ratio_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, peak_
     wheel = wheel.astype(np.intp)
     fitted = np.maximum(np.asarray(peak_mu, dtype=float), 1e-3)[wheel]
     at = slip / np.maximum(np.asarray(peak_slip, dtype=float), 1e-3)[wheel]
-    band = np.searchsorted(_BAND_FLOOR_SLIPS, at, side="right")
-    counts = np.bincount(band, minlength=len(_BAND_FLOOR_SLIPS) + 1)[1:-1]
-    sums = np.bincount(band, weights=mu / fitted, minlength=len(_BAND_FLOOR_SLIPS) + 1)[1:-1]
-    full = counts >= min_samples
-    return float((sums[full] / counts[full]).max()) if full.any() else 0.0
+    means, full = _band_means(_BAND_FLOOR_SLIPS, at, mu / fitted, min_samples)
+    means, full = means[1:-1], full[1:-1]   # (between the first and the last edge)
+    return float(means[full].max()) if full.any() else 0.0
+
+
+def _band_means(edges: np.ndarray, at: np.ndarray, values: np.ndarray,
+                min_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per band of `at` between consecutive `edges` (band 0 below the first edge, the last one
+    past the last edge): the mean of `values` over its samples, and whether it has `min_samples`
+    of them."""
+    band = np.searchsorted(edges, at, side="right")
+    counts = np.bincount(band, minlength=len(edges) + 1)
+    sums = np.bincount(band, weights=values, minlength=len(edges) + 1)
+    return np.divide(sums, counts, out=np.zeros(len(counts)), where=counts > 0), counts >= min_samples
 
 
 class EstimateConfidence:
@@ -289,12 +298,10 @@ class EstimateConfidence:
         lift = published - np.asarray(fitted_mu, dtype=float)
         peak_mu = published[wheel]
         peak_slip = np.maximum(np.asarray(wheel_lam, dtype=float), 1e-3)[wheel]
-        band = np.searchsorted(_MISFIT_SLIP_BANDS, w.slip[lo:hi] / peak_slip, side="right")
         excess = (-model_minus_data - lift[wheel]) / peak_mu
-        counts = np.bincount(band, minlength=len(_MISFIT_SLIP_BANDS) + 1)
-        sums = np.bincount(band, weights=excess, minlength=len(_MISFIT_SLIP_BANDS) + 1)
-        full = counts >= self.options.misfit_bin_samples
+        means, full = _band_means(_MISFIT_SLIP_BANDS, w.slip[lo:hi] / peak_slip, excess,
+                                  self.options.misfit_bin_samples)
         full[0] = False   # (below half the peak slip: the slip stiffness and the pedal's transient, not the peak)
         if not full.any():
             return 0.0
-        return max(0.0, float((sums[full] / counts[full]).max()))
+        return max(0.0, float(means[full].max()))

@@ -16,6 +16,13 @@ Two sources; either one marks a wheel:
   four-channel ABS does not release every wheel in the same instant, except on ice, where the
   slip then runs away and the estimator has that evidence instead. A car that reports only its
   master-cylinder pressure on every wheel shows no per-wheel release: only its flags count.
+- the wheel pressures apart from each other: a wheel's pressure fallen by a smaller share of its
+  maximum than that, more than the demand (or, without the master cylinder's pressure, the
+  least fallen other wheel) fell over the same window. One master cylinder feeds every wheel:
+  the pedal moves all of them by the same share, and only the ABS valves move one wheel
+  against another. An ABS that reapplies in small steps and dumps briefly (a wheel-deceleration
+  controller at the top of its pressure, a slip controller) modulates by 10–20 % and never
+  lets go by a quarter.
 
 A mark lasts `memory_s` (about the estimator's excitation window): the release comes after the
 peak, the evidence is for the samples just before it.
@@ -36,6 +43,7 @@ class AbsActivityOptions:
     window_s: float = 0.3            # a wheel's pressure is compared with its own maximum over this
     min_drop_bar: float = 5.0        # a release: at least this far below that maximum ...
     min_drop_ratio: float = 0.25     # ... and this share of it
+    min_relative_drop: float = 0.10  # or this share more than the demand (other wheels) fell
     min_pressure_bar: float = 10.0   # only where the wheel was braked this hard
     demand_kept_ratio: float = 0.8   # the driver's demand stays above this share of its own maximum
     memory_s: float = 0.3            # a mark lasts this long
@@ -78,15 +86,20 @@ class AbsActivity:
         if any(p is None or not math.isfinite(p) for p in pressures):
             return NO_ACTIVITY
         now = [float(p) for p in pressures]  # type: ignore[arg-type]
-        demand = float(master_bar) if master_bar is not None and math.isfinite(master_bar) else max(now)
+        has_master = master_bar is not None and math.isfinite(master_bar)
+        demand = float(master_bar) if has_master else max(now)  # type: ignore[arg-type]
         since = time_s - o.window_s
         maxima = [_running_max(q, time_s, value, since) for q, value in zip(self._maxima, now + [demand])]
         if demand < o.demand_kept_ratio * maxima[4]:
             return NO_ACTIVITY      # the driver is letting go: every pressure falls, none is a release
+        fallen = [(m - p) / m if m > 0.0 else 0.0 for m, p in zip(maxima, now + [demand])]
         out = []
         for i in range(4):
             peak, drop = maxima[i], maxima[i] - now[i]
-            out.append(peak >= o.min_pressure_bar and drop >= o.min_drop_bar and drop >= o.min_drop_ratio * peak)
+            # What the pedal took off every wheel: the master's fall, else the other wheels' least.
+            pedal = fallen[4] if has_master else min(fallen[j] for j in range(4) if j != i)
+            out.append(peak >= o.min_pressure_bar and drop >= o.min_drop_bar
+                       and (drop >= o.min_drop_ratio * peak or fallen[i] - pedal >= o.min_relative_drop))
         return tuple(out)  # type: ignore[return-value]
 
 

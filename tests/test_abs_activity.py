@@ -59,6 +59,24 @@ def test_light_braking_and_small_wiggles_are_not_releases():
     assert not any(any(m) for _, m in run(AbsActivity(), wiggle))
 
 
+def test_a_shallow_dip_against_the_other_wheels_is_a_release_and_the_pedal_easing_is_not():
+    # The fronts dip by 15 % (170 → 145 bar) while the rears hold: only ABS valves move one wheel
+    # against another (a wheel-deceleration ABS reapplying in steps dumps this little).
+    dip = lambda t: (170.0 if t < 0.2 else 145.0,) * 2 + (150.0, 150.0)  # noqa: E731
+    marks = run(AbsActivity(), dip)
+    assert not any(any(m) for t, m in marks if t < 0.195)
+    assert all(m == (True, True, False, False) for t, m in marks if 0.205 < t < 0.45)
+    # The driver easing the pedal by the same 15 %: every wheel falls alike, and so does the
+    # master cylinder where it is mapped.
+    ease = lambda t: (170.0 if t < 0.2 else 145.0,) * 2 + (150.0 if t < 0.2 else 128.0,) * 2  # noqa: E731
+    assert not any(any(m) for _, m in run(AbsActivity(), ease))
+    assert not any(any(m) for _, m in run(AbsActivity(), ease, master_at=lambda t: 200.0 if t < 0.2 else 170.0))
+    # Against a master cylinder that holds, the same 15 % dip on one wheel is a release.
+    one = lambda t: (170.0 if t < 0.2 else 145.0, 170.0, 150.0, 150.0)  # noqa: E731
+    marks = run(AbsActivity(), one, master_at=lambda t: 200.0)
+    assert any(m == (True, False, False, False) for t, m in marks if 0.2 < t < 0.4)
+
+
 def test_the_cars_flag_marks_every_wheel_and_a_clock_step_back_forgets_the_maxima():
     a = AbsActivity()
     assert a.update(0.0, (50.0,) * 4, None, 1.0, NO_FLAGS) == (True,) * 4

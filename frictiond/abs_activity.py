@@ -7,7 +7,7 @@ worked at its grip limit. It is the only evidence a well-tuned ABS gives: one th
 wheel within a few per cent of slip never lets the slip run away, which is what the estimator
 otherwise waits for before it trusts a first peak.
 
-Two sources; either one marks a wheel:
+Two sources, the pressures read two ways; any one marks a wheel:
 - the car's own flags, when the signal map has them: `abs_active` (the ABS is regulating, any
   wheel) or `abs_active_fl` … `abs_active_rr` (per wheel); a value ≥ 0.5 is "on";
 - the wheel pressures: a wheel's pressure fallen well below its own maximum of the last

@@ -12,7 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
-from . import input_quality
+from . import input_quality, not_valid
 from .samples import LEFT_WHEELS, RIGHT_WHEELS, WHEELS
 
 N_WHEELS = len(WHEELS)
@@ -140,12 +140,17 @@ class EstimateConfidence:
         o = self.options
         return body_mu * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
 
-    def _barred_from_valid(self, now_s: float, mu_max: float, wheel_mu: Sequence[float]) -> bool:
-        """Whether μ_max may not be VALID whatever its confidence: below the stop's floor, from a
-        model that misfits the tyre (`_misfit`), or leaning on wheels that have not shown their
-        peak (`_leans_on_unshown_wheels`)."""
-        return (mu_max < self._stop_floor() or self._misfit(now_s)
-                or self._leans_on_unshown_wheels(now_s, wheel_mu))
+    def _barred_from_valid(self, now_s: float, mu_max: float, wheel_mu: Sequence[float]) -> str:
+        """What bars μ_max from VALID whatever its confidence ("" when nothing does): below the
+        stop's floor, from a model that misfits the tyre (`_misfit`), or leaning on wheels that
+        have not shown their peak (`_leans_on_unshown_wheels`)."""
+        if mu_max < self._stop_floor():
+            return not_valid.BELOW_STOP_FLOOR
+        if self._misfit(now_s):
+            return not_valid.MISFIT
+        if self._leans_on_unshown_wheels(now_s, wheel_mu):
+            return not_valid.UNSHOWN_WHEELS
+        return ""
 
     def _leans_on_unshown_wheels(self, now_s: float, wheel_mu: Sequence[float]) -> bool:
         """Whether μ_max depends on the peaks of wheels whose data have not shown them lately.

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from . import not_valid
 from .peak_evidence import N_WHEELS
 from .samples import FrictionEstimate, Status
 from .tyre_model import LugreParams, braking_mu_and_partials_few, peaks
@@ -91,14 +92,18 @@ class EstimateReport:
         last = self._last_estimate
         kept = last is not None and last.status == Status.VALID and self._last_valid is not None
         threshold = o.keep_valid_confidence if kept else o.valid_confidence
-        if excitation > 0 and self._barred_from_valid(now_s, mu_max, wheel_mu):
+        bar = self._barred_from_valid(now_s, mu_max, wheel_mu) if excitation > 0 else ""
+        if bar:
             confidence = min(confidence, 0.5 * threshold)
+        self._not_valid = bar or not_valid.LOW_CONFIDENCE
         if excitation > 0 and confidence >= threshold:
             status = Status.VALID
             self._last_excited_s = now_s
+            self._not_valid = ""
         elif excitation > 0:
             status = Status.CONVERGING
         else:
+            self._not_valid = not_valid.NOT_EXCITED
             if now_s - self._last_excited_s > o.excitation_hold_s or self._last_valid is None:
                 # Braking goes on but the data no longer show the peak (a new road, or ABS
                 # backing off): report the fit, not trusted, rather than an old VALID.
@@ -190,12 +195,16 @@ class EstimateReport:
         o = self.options
         excitation = self._excitation_cache or 0.0
         if excitation <= 0.0 or now_s - self._last_fit_s > o.excitation_window_s:
+            self._not_valid = not_valid.NOT_EXCITED
             return dataclasses.replace(last, time_s=now_s)
         confidence = self._confidence(now_s, last.mu_max, last.mu_max_std, excitation)
-        if self._barred_from_valid(now_s, last.mu_max, last.wheel_mu_max):
+        bar = self._barred_from_valid(now_s, last.mu_max, last.wheel_mu_max)
+        if bar:
             confidence = min(confidence, 0.5 * o.valid_confidence)   # (as `_report` does)
         if confidence < o.valid_confidence:
+            self._not_valid = bar or not_valid.LOW_CONFIDENCE
             return dataclasses.replace(last, time_s=now_s, confidence=confidence)
+        self._not_valid = ""
         estimate = dataclasses.replace(last, time_s=now_s, status=Status.VALID, confidence=confidence)
         self._last_valid = estimate
         self._last_excited_s = now_s

@@ -47,6 +47,7 @@ try:
     from . import _fitcore as compiled_fit
 except ImportError:  # pragma: no cover - depends on the install
     compiled_fit = None
+from . import not_valid
 from .samples import FrictionEstimate, PhysicalSample, Status
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta
 from .vehicle import VehicleParams
@@ -479,6 +480,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
         self._excitation_why: list = ["", "", "", ""]
+        self._not_valid = ""          # why the last update's estimate is not VALID (`not_valid`)
         self._data_above_fit = 0.0
         self._numpy_residuals: np.ndarray | None = None
         self._innovation_score = 0.0
@@ -571,6 +573,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         o = self.options
         t = sample.time_s
         window = self._window
+        self._not_valid = not_valid.FEW_SAMPLES   # (until a fit or a restated one says otherwise)
         if not math.isfinite(t) or not math.isfinite(sample.speed_mps):
             return self._hold(self._last_sample_s if math.isfinite(self._last_sample_s) else 0.0, 0.0)
         if t < self._last_sample_s - 1e-3:
@@ -606,6 +609,16 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         if estimate.status != Status.VALID and v >= o.peak_evidence_min_speed:
             self._withdrawn_moving_s = t   # (`_hold`: what was withdrawn while moving stays withdrawn)
         return estimate
+
+    @property
+    def not_valid_reason(self) -> str:
+        """Why the last update's estimate is not VALID, in words (`not_valid`); "" when it is."""
+        last = self._last_estimate
+        if last is None or last.status == Status.VALID:
+            return ""
+        if self._not_valid == not_valid.NOT_EXCITED:
+            return not_valid.not_excited_reason(self._excitation_why)
+        return self._not_valid
 
     def _restart_after_clock_step(self, t: float) -> None:
         """The clock went backwards (log splice, clock step): the window's samples would get

@@ -61,6 +61,8 @@ class PipelineStats:
     faults: Counter = field(default_factory=Counter)
     # Updates whose estimate would have been VALID, by the reason it was not (input_quality).
     not_valid: Counter = field(default_factory=Counter)
+    # Braking updates the estimator kept from VALID, by its own reason (`not_valid`).
+    estimator_not_valid: Counter = field(default_factory=Counter)
     # Braking updates at which no wheel's μ could be measured, by the reason.
     unmeasured: Counter = field(default_factory=Counter)
 
@@ -225,8 +227,18 @@ class Pipeline:
                                    confidence=min(estimate.confidence, input_quality.CAPPED_CONFIDENCE))
             elif estimate.status == Status.VALID:
                 self._last_valid = estimate
+            elif result.sample.braking:
+                self._count_not_valid(estimate)
         self.last_estimate = estimate
         return self._emit(time_s, estimate, self.last_sample)
+
+    def _count_not_valid(self, estimate: FrictionEstimate) -> None:
+        """A braking update the estimator itself kept from VALID, by its reason (`not_valid`):
+        the replay summary's answer to "why did this stop stay CONVERGING?"."""
+        if estimate.status in (Status.CONVERGING, Status.NOT_EXCITED):
+            reason = getattr(self.estimator, "not_valid_reason", "")
+            if reason:
+                self.stats.estimator_not_valid[reason] += 1
 
     def _compensated(self, time_s: float, result: FrontEndResult) -> FrontEndResult:
         """The front end's result with the sample the estimator is to see: each one sample late,

@@ -94,6 +94,10 @@ class ReplaySummary:
                 f"{k}: {v * self.update_period_s:.2f} s" for k, v in s.not_valid.most_common())
                 + f"  (VALID → CONVERGING while more than {LEAVE_VALID_SHARE:.0%} of the input frames of the last "
                 "second were rejected as corrupt)")
+        if s.estimator_not_valid:
+            lines.append("why not VALID     " + "; ".join(
+                f"{k}: {v * self.update_period_s:.2f} s" for k, v in s.estimator_not_valid.most_common(5))
+                + "  (braking, by the estimator's reason)")
         if s.unmeasured:
             lines.append("no wheel μ        " + "; ".join(
                 f"{v * self.update_period_s:.2f} s: {k}"

@@ -343,7 +343,8 @@ class Daemon:
         est = self.pipeline.last_estimate
         name = est.status.name if est is not None else "WAITING"
         mu = f"MuMax {est.mu_max:.3f}" if est is not None else "MuMax -"
-        parts = [f"{name} {mu}", f"{self._fps:.0f} frames/s"]
+        reason = self.pipeline.not_valid_reason
+        parts = [f"{name} {mu}" + (f" ({reason})" if reason else ""), f"{self._fps:.0f} frames/s"]
         if self.bus_down or self.bus is None:
             parts.append("bus down, reconnecting")
         if self.bus_off:

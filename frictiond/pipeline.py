@@ -232,6 +232,17 @@ class Pipeline:
         self.last_estimate = estimate
         return self._emit(time_s, estimate, self.last_sample)
 
+    @property
+    def not_valid_reason(self) -> str:
+        """Why the last estimate is CONVERGING or NOT_EXCITED, in words ("" for the other
+        statuses, which say why themselves): too much corrupt input, or the estimator's reason."""
+        est = self.last_estimate
+        if est is None or est.status not in (Status.CONVERGING, Status.NOT_EXCITED):
+            return ""
+        if self._corrupt_input:
+            return input_quality.REASON
+        return getattr(self.estimator, "not_valid_reason", "")
+
     def _count_not_valid(self, estimate: FrictionEstimate) -> None:
         """A braking update the estimator itself kept from VALID, by its reason (`not_valid`):
         the replay summary's answer to "why did this stop stay CONVERGING?"."""

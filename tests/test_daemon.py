@@ -677,3 +677,26 @@ def test_wheel_speeds_at_another_rate_than_the_dbc_says_is_logged(default_config
         assert len(found) == 1 and "every 25.0 ms" in found[0] and "is 10.0 ms" in found[0], found
     else:
         assert not found
+
+
+def test_the_status_line_says_why_the_estimate_is_not_valid(default_config):
+    # systemctl status shows the daemon's STATUS= line: a stop that stays CONVERGING says why,
+    # in the estimator's words (firm braking below the peak shows no peak), a VALID one does not.
+    from frictiond import not_valid
+    from frictiond.sim_frames import simulate_frames
+
+    d = Daemon(default_config, bus_factory=lambda *a, **kw: None, install_signals=False)
+    d._fps = 0.0
+    frames, _ = simulate_frames(default_config, "moderate_wet", seed=1)
+    for frame in frames[:len(frames) * 2 // 3]:
+        d.pipeline.process(frame)
+    assert d.pipeline.last_estimate.status == Status.CONVERGING
+    assert f"CONVERGING MuMax {d.pipeline.last_estimate.mu_max:.3f} ({not_valid.NOT_EXCITED}" in d.status_text()
+    d.pipeline = Pipeline(default_config)
+    frames, _ = simulate_frames(default_config, "dry", seed=1)
+    for frame in frames:
+        d.pipeline.process(frame)
+        if d.pipeline.last_estimate is not None and d.pipeline.last_estimate.status == Status.VALID:
+            break
+    assert d.pipeline.last_estimate.status == Status.VALID
+    assert d.status_text().startswith(f"VALID MuMax {d.pipeline.last_estimate.mu_max:.3f}, ")

@@ -71,3 +71,17 @@ def test_a_stop_valid_throughout_its_abs_has_little_to_explain(default_config):
     replay_frames(pipeline, frames)
     valid = pipeline.stats.status_updates[Status.VALID]
     assert valid > 0 and sum(pipeline.stats.estimator_not_valid.values()) < 0.5 * valid
+
+
+def test_the_pipeline_names_corrupt_input_as_its_reason(default_config):
+    from frictiond import corruption, input_quality
+    from frictiond.sim_frames import input_codec_for
+
+    frames, _ = simulate_frames(default_config, "wet", seed=1)
+    damaged, _ = corruption.corrupt("random payload", frames, input_codec_for(default_config), 0.12, seed=3)
+    pipeline = Pipeline(default_config)
+    reasons = set()
+    for frame in damaged:
+        pipeline.process(frame)
+        reasons.add(pipeline.not_valid_reason)
+    assert input_quality.REASON in reasons

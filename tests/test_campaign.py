@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import re
 from pathlib import Path
@@ -12,7 +13,7 @@ import pytest
 from frictiond.campaign import draw as draw_mod
 from frictiond.campaign.abs_control import ABS_FAMILIES
 from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, draw_stop, seeds_for
-from frictiond.campaign.report import format_families, full_report, target_rows
+from frictiond.campaign.report import format_families, format_not_valid, full_report, target_rows
 from frictiond.campaign.run import load_rows, run_campaign, save_rows
 from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, WHEEL_MESSAGE
 from frictiond.campaign.simulate import simulate_stop
@@ -179,8 +180,15 @@ def test_a_small_campaign_runs_end_to_end_and_reports(tmp_path):
         assert r["lugre_outputs"] > 50 and r["rls_outputs"] == r["lugre_outputs"]
     text = full_report(rows, "dev seeds", worst=3)
     for needle in ("== targets", "burckhardt-rls", "== per family", "abs=", "manoeuvre=", "== distributions",
-                   "== worst 3 stops", "python benchmarks/campaign.py --reproduce"):
+                   "== worst 3 stops", "python benchmarks/campaign.py --reproduce", "== why not VALID"):
         assert needle in text
+    # The braking time lugre-tr kept from VALID, by its reason (the baseline gives none): no
+    # more than the stop lasted, and named in the family table.
+    held_back = [json.loads(r["lugre_not_valid"]) for r in rows]
+    assert all(json.loads(r["rls_not_valid"]) == {} for r in rows)
+    assert any(held_back) and all(0.0 < sum(h.values()) <= r["duration_s"] for h, r in zip(held_back, rows) if h)
+    biggest = max((k for h in held_back for k in h), key=lambda k: sum(h.get(k, 0.0) for h in held_back))
+    assert biggest in format_not_valid(rows)
     # Each stop counted once per grouping, the cars' sensors among them (with the master
     # cylinder's pressure only, no wheel torque is known once an ABS has released a wheel).
     marked = [dict(r, master_only=i < 2) for i, r in enumerate(rows)]
@@ -193,6 +201,7 @@ def test_a_small_campaign_runs_end_to_end_and_reports(tmp_path):
     path = tmp_path / "rows.json"
     save_rows(rows, path)
     back = load_rows(path)
+    assert [r["lugre_not_valid"] for r in back] == [r["lugre_not_valid"] for r in rows]
     assert back[3]["lugre_mae"] == rows[3]["lugre_mae"] or (math.isinf(rows[3]["lugre_mae"])
                                                            and math.isinf(back[3]["lugre_mae"]))
 

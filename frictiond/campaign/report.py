@@ -1,7 +1,9 @@
-"""The campaign's tables: targets (issue 21) with PASS/FAIL per estimator, per family,
-distributions, and the worst stops with the command that reproduces each."""
+"""The campaign's tables: targets (issue 21) with PASS/FAIL per estimator, per family, why
+not VALID (the estimator's reasons, per ABS family), distributions, and the worst stops with the
+command that reproduces each."""
 from __future__ import annotations
 
+import json
 import math
 from collections import defaultdict
 from typing import Any, Callable, Sequence
@@ -214,7 +216,32 @@ def reason(r: Row, p: str = "lugre") -> str:
         mae = r[f"{p}_mae"]
         parts.append(f"MAE {mae:.3f} vs truth {r[f'{p}_span_truth']:.2f}" if math.isfinite(mae) else "no VALID in span")
         parts.append(f"VALID {100 * r[f'{p}_valid_share']:.0f} % of span")
+        held_back = not_valid_seconds(r, p)
+        if held_back:
+            most = max(held_back, key=held_back.get)
+            parts.append(f"held back mostly by: {most}")
     return "; ".join(parts) or "ok"
+
+
+def not_valid_seconds(r: Row, p: str = "lugre") -> dict[str, float]:
+    """The stop's braking time kept from VALID, by the estimator's reason ({} in rows without it)."""
+    return json.loads(r.get(f"{p}_not_valid") or "{}")
+
+
+def format_not_valid(rows: Sequence[Row], p: str = "lugre", top: int = 4) -> str:
+    """Per ABS family (master-cylinder-only cars apart), the braking time the estimator kept from
+    VALID, by its reason: what holds each family back, in the estimator's own words."""
+    lines = [f"== why not VALID ({ESTIMATORS[p]}: braking time kept from VALID, by the estimator's reason) =="]
+    groups: dict[str, dict[str, float]] = defaultdict(lambda: defaultdict(float))
+    for r in abs_rows(rows):
+        label = f"{r['abs']}{' (master only)' if r.get('master_only') else ''}"
+        for reason_, seconds in not_valid_seconds(r, p).items():
+            groups[label][reason_] += seconds
+    for label in sorted(groups):
+        total = sum(groups[label].values())
+        ranked = sorted(groups[label].items(), key=lambda kv: -kv[1])[:top]
+        lines.append(f"{label:26s} {total:8.1f} s  " + "; ".join(f"{k} {100 * v / total:.0f} %" for k, v in ranked))
+    return "\n".join(lines)
 
 
 def reproduce_command(r: Row, family: str | None = None) -> str:
@@ -237,4 +264,4 @@ def format_worst(rows: Sequence[Row], n: int, family: str | None = None, p: str 
 
 def full_report(rows: Sequence[Row], title: str, worst: int = 15, family: str | None = None) -> str:
     return "\n\n".join([format_targets(rows, title), format_comparison(rows), format_families(rows),
-                        format_distributions(rows), format_worst(rows, worst, family)])
+                        format_not_valid(rows), format_distributions(rows), format_worst(rows, worst, family)])

@@ -4,13 +4,15 @@ Per estimator, the metrics of `frictiond.evaluation` (MAE over VALID outputs in 
 span, VALID share of the span, convergence, false VALID), plus what the campaign's targets need
 beyond them: FAULT outputs, a crash of the pipeline (recorded, never raised), and the
 calibration counts — VALID outputs with confidence ≥ c, and how many of them are within 10 % of
-the truth, for c in `CALIBRATION_LEVELS` (summed over stops by the report).
+the truth, for c in `CALIBRATION_LEVELS` (summed over stops by the report) — and the braking time
+the estimator kept from VALID, by its reason (`not_valid`).
 Per stop, from the truth: the highest utilisation |F_x| / (μ_max F_z) any wheel reached while
 braking 1 m/s above the ABS cut-out speed (`max_utilisation`): a stop that stayed below 0.8
 never showed the peak.
 """
 from __future__ import annotations
 
+import json
 import math
 import time
 import traceback
@@ -79,12 +81,20 @@ def estimator_scores(estimates: Sequence[FrictionEstimate], truth: list[dict[str
     return out
 
 
+def not_valid_seconds(pipeline: Any) -> str:
+    """The braking time the estimator kept from VALID, by its own reason (`frictiond.not_valid`),
+    as JSON {reason: seconds}: one string column, in the JSON and the Parquet results alike."""
+    period = pipeline.front_end.sample_period_s
+    return json.dumps({k: round(n * period, 3) for k, n in pipeline.stats.estimator_not_valid.most_common()})
+
+
 def _crashed(exc: BaseException) -> dict[str, Any]:
     last = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
     where = f" at {last.filename.rsplit('/', 1)[-1]}:{last.lineno}" if last else ""
     out: dict[str, Any] = {"mae": math.inf, "mae_rel": math.inf, "valid_share": 0.0, "conv_s": math.inf,
                            "reconv_s": math.nan, "false_valid": 0, "valid": 0, "outputs": 0, "span_truth": math.nan,
-                           "faults": 0, "faults_moving": 0, "crash": f"{type(exc).__name__}: {exc}"[:200] + where}
+                           "faults": 0, "faults_moving": 0, "crash": f"{type(exc).__name__}: {exc}"[:200] + where,
+                           "not_valid": "{}"}
     for c in CALIBRATION_LEVELS:
         out[f"cal_n_{int(c * 100)}"] = out[f"cal_ok_{int(c * 100)}"] = 0
     return out
@@ -114,8 +124,9 @@ def score_stop(stop: CampaignStop) -> dict[str, Any]:
     for prefix, kind in ESTIMATORS.items():
         t0 = time.process_time()
         try:
-            _pipeline, estimates = estimates_of(stop.config(kind), stop.frames)
+            pipeline, estimates = estimates_of(stop.config(kind), stop.frames)
             scores = estimator_scores(estimates, stop.truth)
+            scores["not_valid"] = not_valid_seconds(pipeline)
         except Exception as exc:   # a crash is a result of the campaign, not the campaign's end
             scores = _crashed(exc)
         scores["cpu_s"] = time.process_time() - t0

@@ -224,7 +224,8 @@ def reason(r: Row, p: str = "lugre") -> str:
 
 
 def not_valid_seconds(r: Row, p: str = "lugre") -> dict[str, float]:
-    """The stop's braking time kept from VALID, by the estimator's reason ({} in rows without it)."""
+    """The stop's braking time kept from VALID, by the estimator's reason (`score.not_valid_json`
+    read back; {} in rows without it)."""
     return json.loads(r.get(f"{p}_not_valid") or "{}")
 
 

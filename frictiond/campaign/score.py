@@ -81,7 +81,7 @@ def estimator_scores(estimates: Sequence[FrictionEstimate], truth: list[dict[str
     return out
 
 
-def not_valid_seconds(pipeline: Any) -> str:
+def not_valid_json(pipeline: Any) -> str:
     """The braking time the estimator kept from VALID, by its own reason (`frictiond.not_valid`),
     as JSON {reason: seconds}: one string column, in the JSON and the Parquet results alike."""
     period = pipeline.front_end.sample_period_s
@@ -126,7 +126,7 @@ def score_stop(stop: CampaignStop) -> dict[str, Any]:
         try:
             pipeline, estimates = estimates_of(stop.config(kind), stop.frames)
             scores = estimator_scores(estimates, stop.truth)
-            scores["not_valid"] = not_valid_seconds(pipeline)
+            scores["not_valid"] = not_valid_json(pipeline)
         except Exception as exc:   # a crash is a result of the campaign, not the campaign's end
             scores = _crashed(exc)
         scores["cpu_s"] = time.process_time() - t0

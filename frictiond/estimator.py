@@ -493,7 +493,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._peak_seen_speed = 0.0
         self._abs_seen_s = [-math.inf] * N_WHEELS
         self._wheel_shown_s = [-math.inf] * N_WHEELS
-        self._shape_showed_peak = [False] * N_WHEELS
+        self._shape_proximity = [0.0] * N_WHEELS
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
@@ -529,7 +529,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._peak_seen_speed = 0.0
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._wheel_shown_s = [-math.inf] * N_WHEELS
-        self._shape_showed_peak = [False] * N_WHEELS
+        self._shape_proximity = [0.0] * N_WHEELS
         self._innovation_score = 0.0
         self._radius = None
         self._last_update_s = None

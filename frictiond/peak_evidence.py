@@ -247,7 +247,8 @@ class PeakEvidence:
         if not spread:
             # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
             # ice): the shape of the curve near its peak is not observed ...
-            if (peak_seen and self._shape_showed_peak[wheel] and lam_hi >= o.excitation_min_slip
+            shown = self._shape_proximity[wheel]
+            if (peak_seen and shown >= o.excitation_slip_ratio and lam_hi >= o.excitation_min_slip
                     and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star):
                 # ... unless this stop's data have shown the peak already, this wheel's own last
                 # slips with spread said so, and the wheel now stays past it, using the grip the
@@ -255,10 +256,13 @@ class PeakEvidence:
                 # being used, not left behind. (Where the wheel's slips last spread its data were
                 # still rising, the fit's peak under a held slip is where the fit put it, free
                 # to: a slip target short of the peak leaves nothing to locate it.)
-                return ("past the peak ({:.2f})", lam_lo / lam_star), 1.0, False
+                # It carries no more than that verdict showed: the slip is held, and only the
+                # fit's peak has moved under it since (a peak moved below a held slip is the
+                # fit talking itself into excitation).
+                return ("past the peak ({:.2f})", lam_lo / lam_star), shown, False
             return "no slip spread", 0.0, True
         verdict = self._shape_verdict(wheel, stats, mu_star, lam_star, fit_at_hi, capped)
-        self._shape_showed_peak[wheel] = verdict[1] >= o.excitation_slip_ratio
+        self._shape_proximity[wheel] = verdict[1]
         return verdict
 
     def _shape_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float,

@@ -620,6 +620,20 @@ def test_a_held_slip_past_a_peak_its_wheels_showed_stays_valid():
     assert scores["valid"] > 300 and scores["false_valid"] == 0 and scores["mae"] < 0.02
 
 
+@pytest.mark.parametrize("shown", [0.77, 1.0])
+def test_a_held_slip_carries_no_more_than_its_wheel_last_showed(shown):
+    # A slip controller holds λ = 0.108 (±0.5 %) and the fit has since moved its peak to 0.068,
+    # under the held slip: the data did not move, so "past the peak" is only the wheel's last
+    # verdict on spread slips carried on, at that verdict's strength. (Held-out stop 1000829:
+    # a marginal 0.75 carried as 1.0 made 367 outputs VALID, 28 % low.)
+    est = LugreTrustRegionEstimator()
+    est._shape_proximity[0] = shown
+    stats = (50.0, 0.0, 0.0, 0.1075, 0.1085, 0.058, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    why, proximity, fresh = est._wheel_verdict(0, stats, 0.059, 0.068, 0.059, False, 30.0, True, True)
+    assert why[0].startswith("past the peak") and not fresh
+    assert proximity == shown
+
+
 @pytest.mark.parametrize("elasticity, fitted_peak_slip, contradicted", [
     (0.9, 0.10, True),    # μ rising at 0.9 of μ/λ at λ 0.2, twice past the fitted peak
     (0.5, 0.10, False),   # rising, but not clearly enough to contradict the fit

@@ -49,6 +49,7 @@ except ImportError:  # pragma: no cover - depends on the install
     compiled_fit = None
 from . import not_valid
 from .samples import FrictionEstimate, PhysicalSample, Status
+from .speed_error import SpeedErrorBound, SpeedErrorOptions
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta
 from .vehicle import VehicleParams
 from .estimate_confidence import EstimateConfidence
@@ -117,6 +118,10 @@ class LugreTROptions:
     max_peak_secant: float = 25.0         # μ/λ at a peak stays below this on every road
     min_slip_spread: float = 0.3          # a wheel's recent slips (10–90 % quantiles) span this share of the highest
     abs_min_slip_spread: float = 0.15     # ... or this share with an ABS working the wheel (its cycles hold the rest)
+    # ... beyond twice what the speed estimate's error makes of a held slip (`speed_error`):
+    speed_error_mps: float = 0.02         # its error where two wheels, a reference or free rolling anchor it
+    speed_drift_mps2: float = 0.02        # ... growing this fast while it coasts on the accelerometer (its offset's error)
+    speed_anchor_slip: float = 0.01       # anchored: the second-least-slipping wheel within this slip of it
     wheel_evidence_hold_s: float = 1.0    # a wheel has shown its peak if a verdict said so within this long
     unshown_wheel_tolerance: float = 0.1  # VALID: μ_max moves less than this share if the wheels that have not
     #   shown their peak took the others' (split μ: their extrapolated peaks are not evidence)
@@ -492,6 +497,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
         self._abs_seen_s = [-math.inf] * N_WHEELS
+        self._speed_error = SpeedErrorBound(SpeedErrorOptions(
+            o.speed_error_mps, o.speed_drift_mps2, o.speed_anchor_slip, o.excitation_window_s))
         self._wheel_shown_s = [-math.inf] * N_WHEELS
         self._shape_proximity = [0.0] * N_WHEELS
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
@@ -635,6 +642,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             self._last_excited_s += step
         if math.isfinite(self._last_jump_s):
             self._last_jump_s += step
+        self._speed_error.shift(step)
         self._excited_since_s = math.inf
 
     def _take_in(self, sample: PhysicalSample) -> int:
@@ -653,6 +661,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         min_slip, isfinite, usable = self.options.min_slip, math.isfinite, sample.usable
         wheel_slips, wheel_mus = sample.slip, sample.mu_used
         self._follow_runaways(t, wheel_slips)
+        self._speed_error.follow(sample)
         abs_active = sample.abs_active
         body_mu = sample.body_mu
         if body_mu == body_mu:   # (not NaN: braking, with a fresh accelerometer)

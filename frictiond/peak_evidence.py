@@ -243,8 +243,10 @@ class PeakEvidence:
         # but noise, and one of its verdicts passing at random would claim a peak that may lie
         # at twice that slip.
         needed_spread = o.abs_min_slip_spread if abs_working else o.min_slip_spread
+        # (Beyond twice what the speed estimate's error alone spreads a held slip by: `speed_error`.)
+        speed_error_spread = self._speed_error.slip_spread(self._last_sample_s, speed)
         spread = (lam_hi >= o.excitation_min_slip
-                  and (lam_hi - lam_lo) >= needed_spread * lam_hi + 2.0 * self._speed_error.slip_spread(self._last_sample_s, speed))
+                  and (lam_hi - lam_lo) >= needed_spread * lam_hi + 2.0 * speed_error_spread)
         if not spread:
             # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
             # ice): the shape of the curve near its peak is not observed ...

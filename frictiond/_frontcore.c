@@ -5,7 +5,7 @@
  * speeds over the window, its glitch test and the torque weights matched to it) and the
  * weighted sums of `FrontEnd._matched` (a signal interpolated at the window's times, weighted
  * as the filter weights the wheel's acceleration; several signals at once), the interpolation of
- * a sample's inputs (`_MessageHistory.value_at`, batched) and `_MessageHistory.push`'s loop
+ * a sample's inputs (`MessageHistory.value_at`, batched) and `MessageHistory.push`'s loop
  * (each decoded value onto its signal's history), and the rest of a sample's physics
  * (`sample_physics`: `FrontEnd._compute_sample` from the inputs on). The Python code stays the reference and
  * the fallback where no compiler was available at install (tests compare the two).
@@ -173,7 +173,7 @@ out:
 
 /* matched(ts, vs, times, weights, floor) -> Σ_k weights_k·x(times_k), x interpolated linearly
  * in the series (ts, vs) and held beyond its ends, as FrontEnd._matched with
- * frontend._interpolation_plan; with a floor, each series value v counts as max(0, v − floor). */
+ * input_alignment.interpolation_plan; with a floor, each series value v counts as max(0, v − floor). */
 /* FrontEnd._matched of one series (o_ts, o_vs) over the window's times and weights: *total
  * (each value less floor_value and clipped at 0 when has_floor). 0, or -1 with an exception. */
 static int matched_sum(PyObject *o_ts, PyObject *o_vs, const double *times, const double *w, Py_ssize_t nt,
@@ -333,7 +333,7 @@ done:
     return out;
 }
 
-/* _MessageHistory.value_at for one signal: its (times, values) deques at time t; a new reference. */
+/* MessageHistory.value_at for one signal: its (times, values) deques at time t; a new reference. */
 static PyObject *value_at(PyObject *pair, double t)
 {
     if (!PyTuple_Check(pair) || PyTuple_GET_SIZE(pair) != 2) {
@@ -416,7 +416,7 @@ static PyObject *py_values_at(PyObject *self, PyObject *args)
 
 static PyObject *deque_append;   /* collections.deque.append, called on the series' deques */
 
-/* _MessageHistory.push's loop: each value into `merged` and onto its (times, values) deques. */
+/* MessageHistory.push's loop: each value into `merged` and onto its (times, values) deques. */
 /* METH_FASTCALL (once per input frame: PyArg_ParseTuple's format cost as much as the loop). */
 static PyObject *py_push_values(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -1238,11 +1238,11 @@ static PyMethodDef methods[] = {
      "matched_many(lookups, times, weights) -> tuple: `matched` of each (series dict, name, floor or None)\n"
      "of lookups (or None); None for a signal without a series yet."},
     {"push_values", (PyCFunction)(void (*)(void))py_push_values, METH_FASTCALL,
-     "push_values(series, merged, time_s, values, new_pair) -> None: _MessageHistory.push's loop\n"
+     "push_values(series, merged, time_s, values, new_pair) -> None: MessageHistory.push's loop\n"
      "(new_pair() makes the (times, values) deques of a signal seen for the first time)."},
     {"values_at", py_values_at, METH_VARARGS,
      "values_at(lookups, t) -> tuple: for each (series dict, name) of lookups (or None), what\n"
-     "_MessageHistory.value_at(t, name) gives: None when the signal has no series yet."},
+     "MessageHistory.value_at(t, name) gives: None when the signal has no series yet."},
     {"sample_physics", (PyCFunction)(void (*)(void))py_sample_physics, METH_FASTCALL,
      "sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,\n"
      "wheel_times, torque_weights, ref, ref_fresh, torque_omega_dot) -> FrontEndResult: FrontEnd._compute_sample after the\n"

@@ -8,7 +8,8 @@ Per wheel-speed (trigger) frame the front end
    signal is evaluated at that same, delayed instant and all carry the same delay
    (`wheel_speed_filter`);
 2. interpolates the other messages (accelerations, pressures, reference speed, drive torque),
-   which arrive with their own phase, at that instant;
+   which arrive with their own phase, at that instant (`input_alignment`), each pressure less
+   its sensor's zero point (`pressure_zeros`);
 3. estimates the vehicle speed (reference sensor when present and fresh, otherwise an
    accelerometer-driven observer corrected by the wheels: `speed_estimate`), the accelerometer
    offset and a brake-gain correction from the body equation (pads move ±20 % in service:
@@ -23,7 +24,6 @@ the faults. Pure numerics: it knows canonical signal names (`input_names`), not 
 from __future__ import annotations
 
 import math
-import statistics
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Iterable, Mapping
@@ -39,9 +39,11 @@ except ImportError:  # pragma: no cover - depends on the install
 from .abs_activity import AbsActivity
 from .body_equation import LEARNT_STATE, BodyEquation
 from .doubtful_inputs import DoubtfulInputs
+from .input_alignment import InputAlignment, MessageHistory, new_series
 from .input_names import (ABS_FLAG_NAMES, DRIVE_TORQUE_NAMES, MASTER_PRESSURE_NAME, PRESSURE_NAMES, REQUIRED_INPUTS,
                           WHEEL_SPEED_NAMES)
 from .plausibility import InputGate
+from .pressure_zeros import PressureZeros
 from .samples import PhysicalSample
 from .speed_estimate import MAX_ABS_ACCEL_MPS2, SpeedEstimate
 from .vehicle import GRAVITY_MPS2, VehicleParams
@@ -52,8 +54,6 @@ _FL, _FR, _RL, _RR = WHEEL_SPEED_NAMES
 # Plausibility limits of physical inputs; beyond them a sensor is broken, not the road special.
 MAX_WHEEL_SPEED_RADPS = 400.0
 FREE_ROLLING_SPREAD = 0.04     # relative wheel-speed spread a curve can explain without any slip
-PRESSURE_ZERO_READINGS = 128   # free-rolling readings a pressure sensor's zero point is the median of
-PRESSURE_ZERO_AT_ZERO = 0.4    # ... and the share of them at 0 that says its zero point is 0
 FREE_ROLLING_ACCEL_MPS2 = 2.0  # a free-rolling wheel's acceleration follows the body's within this
 SETTLE_SLIP = 0.01             # a braked wheel slipping more has a spin-up to settle (`accel_bias_settle_s`)
 MAX_PRESSURE_BAR = 350.0
@@ -140,63 +140,7 @@ class FrontEndResult:
     dead_wheels: tuple[int, ...] = ()
 
 
-def _new_series() -> tuple[deque[float], deque[float]]:
-    """A signal's (times, values) history: the newest 16 of each."""
-    return deque(maxlen=16), deque(maxlen=16)
-
-
-class _MessageHistory:
-    """The last few values of one input message, for interpolation and staleness.
-
-    Each signal keeps its own (time, value) series: a multiplexed message carries only some of
-    its signals per frame, and a page's value must keep the time of the frame that carried it.
-    """
-
-    __slots__ = ("series", "period_s", "last_arrival_s", "merged")
-
-    def __init__(self, period_s: float) -> None:
-        self.series: dict[str, tuple[deque[float], deque[float]]] = {}
-        self.period_s = period_s
-        self.last_arrival_s = -math.inf
-        self.merged: dict[str, float] = {}
-
-    def push(self, time_s: float, values: Mapping[str, float], core: Any = None) -> None:
-        series = self.series
-        if time_s < self.last_arrival_s:
-            # Time went backwards (log splice, clock step): the old history means nothing now.
-            series.clear()
-        if core is not None and type(time_s) is float and type(values) is dict:
-            core.push_values(series, self.merged, time_s, values, _new_series)
-            self.last_arrival_s = time_s
-            return
-        merged = self.merged
-        for name, value in values.items():
-            merged[name] = value
-            pair = series.get(name)
-            if pair is None:
-                pair = series[name] = _new_series()
-            pair[0].append(time_s)
-            pair[1].append(value)
-        self.last_arrival_s = time_s
-
-    def value_at(self, time_s: float, name: str) -> float | None:
-        pair = self.series.get(name)
-        if pair is None:
-            return None
-        times, values = pair
-        if time_s >= times[-1]:
-            return values[-1]
-        for k in range(len(times) - 1, 0, -1):
-            t0 = times[k - 1]
-            if t0 <= time_s:
-                t1 = times[k]
-                v0 = values[k - 1]
-                w = (time_s - t0) / (t1 - t0) if t1 > t0 else 1.0
-                return v0 + w * (values[k] - v0)
-        return values[0]
-
-
-class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
+class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, InputAlignment, PressureZeros):
     """Turns decoded inputs into `PhysicalSample`s, one per trigger (wheel-speed) message."""
 
     def __init__(
@@ -239,11 +183,11 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         if missing:
             raise ValueError(f"required inputs not mapped: {', '.join(missing)}")
         self._history = {
-            m: _MessageHistory(p if p and p > 0 else self.options.default_period)
+            m: MessageHistory(p if p and p > 0 else self.options.default_period)
             for m, p in message_periods.items()
         }
         for m in message_signals:
-            self._history.setdefault(m, _MessageHistory(self.options.default_period))
+            self._history.setdefault(m, MessageHistory(self.options.default_period))
         self._required_histories = tuple((m, self._history[m]) for m in sorted(self.required_messages))
         # What each required message is called in a fault (its first canonical signal's kind).
         self._fault_names = {m: _input_label(message_signals[m]) for m in self.required_messages}
@@ -330,13 +274,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
         self._speed_time_s: float | None = None
         self._reset_body_equation()
         self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
-        # Each pressure sensor's reading with the brakes released (its zero point, learnt while
-        # free rolling: `_learn_pressure_zeros`), taken off its readings; the newest raw readings.
-        self._pressure_zero = dict.fromkeys(PRESSURE_NAMES, 0.0)
-        self._pressure_zero_readings = {name: deque(maxlen=PRESSURE_ZERO_READINGS) for name in PRESSURE_NAMES}
-        self._pressure_zero_samples = 0
-        self._pressure_zeroed = False
-        self._raw_pressures: dict[str, float] = {}
+        self._reset_pressure_zeros()
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
         self._ref_disagreements = 0
@@ -425,8 +363,8 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
             values = self._zeroed_pressures(values)
         core = self.core
         if core is not None and type(time_s) is float and type(values) is dict and time_s >= history.last_arrival_s:
-            # `_MessageHistory.push`'s compiled path, without its call (once per input frame)
-            core.push_values(history.series, history.merged, time_s, values, _new_series)
+            # `MessageHistory.push`'s compiled path, without its call (once per input frame)
+            core.push_values(history.series, history.merged, time_s, values, new_series)
             history.last_arrival_s = time_s
         else:
             history.push(time_s, values, core)
@@ -435,7 +373,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
             return None
         return self._on_trigger(time_s, history)
 
-    def _on_trigger(self, time_s: float, history: _MessageHistory) -> FrontEndResult:
+    def _on_trigger(self, time_s: float, history: MessageHistory) -> FrontEndResult:
         stale = self.stale_messages(time_s)
         values = history.merged
         # (the four wheels spelt out: this runs at the bus rate, and loops cost a frame each)
@@ -548,117 +486,6 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs):
             tuple([value(n, t) for n in ABS_FLAG_NAMES[1:]]) if self._has_wheel_abs_flags else (None,) * 4)
 
     # -- the physics ---------------------------------------------------------------------------
-    def _zeroed_pressures(self, values: Mapping[str, float]) -> Mapping[str, float]:
-        """A pressure message's values less each sensor's zero point (`_learn_pressure_zeros`),
-        not below 0; the raw readings are kept for the learning."""
-        raw = self._raw_pressures
-        zero = self._pressure_zero
-        for name, value in values.items():
-            if name in zero:
-                raw[name] = value
-        if not self._pressure_zeroed:
-            return values
-        return {name: max(0.0, value - zero[name]) if name in zero and value == value else value
-                for name, value in values.items()}
-
-    def _learn_pressure_zeros(self) -> None:
-        """Free rolling (the samples the accelerometer's offset is learnt from: no brake, the
-        wheels' acceleration the body's): the brakes are released and each pressure sensor
-        reads its own zero point. A sensor that reads 0.9 bar there reads 0.9 bar too much
-        under the brakes, 10-30 % of an ABS's pressures on ice. The zero point is the median
-        of the last `PRESSURE_ZERO_READINGS` readings, not their mean: a sensor reads no
-        pressure below 0, so its noise around a true zero is cut to 0 on one side, and a mean
-        would take half a noise's width off every pressure. For the same reason a sensor that
-        reads exactly 0 in `PRESSURE_ZERO_AT_ZERO` of them or more has its zero point at 0 (its
-        median is then as likely one noise sample above it). A negative zero point is not seen
-        either: nothing is taken off those sensors."""
-        raw = self._raw_pressures
-        if not raw:
-            return
-        self._pressure_zero_samples += 1
-        readings = self._pressure_zero_readings
-        for name, value in raw.items():
-            if name in readings and math.isfinite(value):
-                readings[name].append(value)
-        n = self._pressure_zero_samples
-        if n > PRESSURE_ZERO_READINGS and n % 8:
-            return    # (a window of readings moves slowly: its median every 8th sample)
-        zero = self._pressure_zero
-        for name, values in readings.items():
-            if not values:
-                continue
-            # (reading exactly 0 this often, the zero point is within a quarter of the noise of
-            # 0: a median of readings cut at 0 would be a noise sample above it)
-            if sum(v <= 0.0 for v in values) >= PRESSURE_ZERO_AT_ZERO * len(values):
-                zero[name] = 0.0
-            else:
-                zero[name] = max(0.0, float(statistics.median_low(values)))
-        self._pressure_zeroed = any(z > 0.0 for z in zero.values())
-
-    # The wheel's angular acceleration comes from the derivative filter, which averages ω̇ over
-    # its window; the torques and the body acceleration it is set against in the wheel and body
-    # equations are averaged by the same kernel (`wheel_speed_filter._matched_weights`). Against
-    # point values, a fast pressure swing (ABS on ice, where most of the brake torque goes into the
-    # wheel's inertia) left the two out of step: μ read 50 % low while the pressure rose, then as
-    # much high.
-    def _matched_brake_torques(self, pressures: list[float]) -> list[float]:
-        veh = self.vehicle
-        if self._torque_weights is None:
-            return [veh.brake_torque_nm(i, p) for i, p in enumerate(pressures)]
-        plans: dict = {}
-        pushout = veh.brake_pushout_pressure
-        return [veh.brake_gain(i) * self._matched(name, p, plans, pushout)
-                for i, (name, p) in enumerate(zip(PRESSURE_NAMES, pressures))]
-
-    def _matched_inputs(self, pressures: list[float], accel_long_raw: float) -> tuple[list[float], float]:
-        """`_matched_brake_torques` and `_matched_value("accel_long", …)` (one compiled call when built)."""
-        if self.core is None or self._torque_weights is None:
-            return self._matched_brake_torques(pressures), self._matched_value("accel_long", accel_long_raw)
-        matched = self.core.matched_many(self._matched_lookups, self._wheel_times, self._torque_weights)
-        pushout = self.vehicle.brake_pushout_pressure
-        torques = [gain * (m if m is not None else max(0.0, p - pushout))
-                   for gain, m, p in zip(self._brake_gains, matched, pressures)]
-        return torques, (matched[4] if matched[4] is not None else accel_long_raw)
-
-    def _matched_value(self, name: str, fallback: float) -> float:
-        return fallback if self._torque_weights is None else self._matched(name, fallback, {}, None)
-
-    def _matched(self, name: str, fallback: float, plans: dict, floor: float | None) -> float:
-        """Σ w_k·x(t_k) over the derivative window's times, x interpolated in its series like
-        `value_at` (`max(0, x − floor)` per series value when `floor` is given). The
-        interpolation plan depends only on the series' timestamps: signals of one message share it."""
-        history = self._source.get(name)
-        pair = history.series.get(name) if history is not None else None
-        if pair is None:
-            return fallback if floor is None else max(0.0, fallback - floor)
-        ts, vs = pair
-        if self.core is not None:
-            return self.core.matched(ts, vs, self._wheel_times, self._torque_weights, floor)
-        key = (len(ts), ts[0], ts[-1])
-        plan = plans.get(key)
-        if plan is None:
-            plan = plans[key] = _interpolation_plan(list(ts), list(self._wheel_times), self._torque_weights)
-        if floor is None:
-            return sum(a * vs[j] for j, a in plan)
-        total = 0.0
-        for j, a in plan:
-            v = vs[j]
-            if v > floor:
-                total += a * (v - floor)
-        return total
-
-    def _value(self, name: str, time_s: float) -> float | None:
-        history = self._source.get(name)
-        if history is None:
-            return None
-        return history.value_at(time_s, name)
-
-    def _values_at(self, time_s: float) -> tuple[float | None, ...]:
-        """`_value` of each of `_sample_inputs` at one time."""
-        if self.core is not None:
-            return self.core.values_at(self._sample_lookups, time_s)
-        return tuple([self._value(name, time_s) for name in self._sample_inputs])
-
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         opts = self.options
         veh = self.vehicle
@@ -868,29 +695,6 @@ def _input_label(signals: Iterable[str]) -> str:
 _PHYSICS_TYPES = (PhysicalSample, FrontEndResult, "acceleration out of range", "brake pressure out of range",
                   "brake pressure implausible", "wheel speed glitch", "wheel speed stuck",
                   "brake pressure disagrees with deceleration")
-
-
-def _interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:
-    """(series index, coefficient) pairs with Σ coefficient·value = Σ_k weights_k·value(times_k),
-    value interpolated linearly in the series (held beyond its ends) as `_MessageHistory.value_at`."""
-    coefficients: dict[int, float] = {}
-    get = coefficients.get
-    last = len(ts) - 1
-    k = last
-    for t, w in zip(reversed(times), reversed(weights)):
-        if t >= ts[last]:
-            coefficients[last] = get(last, 0.0) + w
-            continue
-        while k > 0 and ts[k - 1] > t:
-            k -= 1
-        if k == 0:
-            coefficients[0] = get(0, 0.0) + w
-            continue
-        t0, t1 = ts[k - 1], ts[k]
-        f = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
-        coefficients[k - 1] = get(k - 1, 0.0) + w * (1.0 - f)
-        coefficients[k] = get(k, 0.0) + w * f
-    return list(coefficients.items())
 
 
 def make_front_end(

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from frictiond import frontend as frontend_module
+from frictiond import input_alignment
 from frictiond.config import default_config_path, load_config
 from frictiond.pipeline import Pipeline
 from frictiond.sim_frames import simulate_frames
@@ -91,7 +92,7 @@ def test_fit_wheels_matches_the_float_fit_and_refuses_bad_input(torque_window):
 @needs_core
 @pytest.mark.parametrize("floor", [None, 0.0, 2.5])
 def test_matched_sum_is_the_interpolation_plan(floor):
-    from frictiond.frontend import _interpolation_plan
+    from frictiond.input_alignment import interpolation_plan
 
     rng = np.random.default_rng(7)
     for _ in range(200):
@@ -101,7 +102,7 @@ def test_matched_sum_is_the_interpolation_plan(floor):
         vs = list(rng.uniform(-1.0, 10.0, len(ts)))
         times = list(np.sort(rng.uniform(-0.02, 0.14, 7)))  # before, inside and after the series
         weights = list(rng.normal(size=7))
-        plan = _interpolation_plan(ts, times, weights)
+        plan = interpolation_plan(ts, times, weights)
         if floor is None:
             expected = sum(a * vs[j] for j, a in plan)
         else:
@@ -114,7 +115,7 @@ def test_matched_sum_is_the_interpolation_plan(floor):
 @needs_core
 def test_values_at_is_value_at_for_every_signal():
     rng = np.random.default_rng(21)
-    history = frontend_module._MessageHistory(0.01)
+    history = input_alignment.MessageHistory(0.01)
     for step in range(60):
         t = 0.01 * step + float(rng.uniform(-0.004, 0.004))
         if step % 7 == 3:
@@ -135,7 +136,7 @@ def test_values_at_is_value_at_for_every_signal():
 @needs_core
 def test_matched_many_is_matched_for_each_signal():
     rng = np.random.default_rng(22)
-    history = frontend_module._MessageHistory(0.01)
+    history = input_alignment.MessageHistory(0.01)
     for step in range(30):
         history.push(0.01 * step + float(rng.uniform(-0.003, 0.003)),
                      {"p": float(rng.uniform(0, 80)), "a": float(rng.normal())})
@@ -155,7 +156,7 @@ def test_matched_many_is_matched_for_each_signal():
 @needs_core
 def test_history_push_is_the_same_on_both_paths():
     rng = np.random.default_rng(23)
-    compiled, floats = frontend_module._MessageHistory(0.01), frontend_module._MessageHistory(0.01)
+    compiled, floats = input_alignment.MessageHistory(0.01), input_alignment.MessageHistory(0.01)
     t = 0.0
     for step in range(80):
         t += float(rng.choice([0.01, 0.01, 0.01, -0.05]))   # now and then back in time: cleared
@@ -168,7 +169,7 @@ def test_history_push_is_the_same_on_both_paths():
                {n: (list(ts), list(vs)) for n, (ts, vs) in floats.series.items()}
     assert all(ts.maxlen == 16 for ts, _ in compiled.series.values())
     # push_values converts its arguments itself (METH_FASTCALL): wrong ones are refused.
-    good = [compiled.series, compiled.merged, t + 1.0, {"a": 1.0}, frontend_module._new_series]
+    good = [compiled.series, compiled.merged, t + 1.0, {"a": 1.0}, input_alignment.new_series]
     assert_each_refused(core.push_values, good, ((0, []), (1, None), (2, 1), (3, [("a", 1.0)])))
     assert core.push_values(*good) is None and compiled.merged["a"] == 1.0
 

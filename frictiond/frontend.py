@@ -16,10 +16,10 @@ Per wheel-speed (trigger) frame the front end
    `body_equation`);
 4. computes normal loads (model.md, physics signs), tyre forces from the wheel equation,
    utilised friction and slip, and gates each wheel's sample; a sample whose inputs are in
-   doubt is not fitted (`doubtful_inputs`).
+   doubt is not fitted (`doubtful_inputs`), and faulty sensors are reported (`sensor_faults`).
 
-Those modules hold parts of `FrontEnd`; this one holds the histories, the sample's physics and
-the faults. Pure numerics: it knows canonical signal names (`input_names`), not CAN.
+Those modules hold parts of `FrontEnd`; this one holds the histories and the sample's physics
+with the faults it finds. Pure numerics: it knows canonical signal names (`input_names`), not CAN.
 """
 from __future__ import annotations
 
@@ -45,6 +45,7 @@ from .input_names import (ABS_FLAG_NAMES, DRIVE_TORQUE_NAMES, MASTER_PRESSURE_NA
 from .plausibility import InputGate
 from .pressure_zeros import PressureZeros
 from .samples import PhysicalSample
+from .sensor_faults import SensorFaults, stood_in_for
 from .speed_estimate import MAX_ABS_ACCEL_MPS2, SpeedEstimate
 from .vehicle import GRAVITY_MPS2, VehicleParams
 from .wheel_speed_filter import SUSPECT_JERK_RADPS3, WheelSpeedFilter
@@ -140,7 +141,8 @@ class FrontEndResult:
     dead_wheels: tuple[int, ...] = ()
 
 
-class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, InputAlignment, PressureZeros):
+class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, InputAlignment, PressureZeros,
+               SensorFaults):
     """Turns decoded inputs into `PhysicalSample`s, one per trigger (wheel-speed) message."""
 
     def __init__(
@@ -290,38 +292,8 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         self._trigger_period_s = 0.0
         self._triggers_timed = 0
 
-    @property
-    def measured_period_s(self) -> float | None:
-        """The wheel-speed message's mean cycle time as it arrives (None before 100 frames)."""
-        return self._trigger_period_s if self._triggers_timed >= 100 else None
-
-    def period_mismatch(self) -> bool:
-        """Whether the wheel speeds arrive at a rate far from the DBC's cycle time (the derivative
-        window, the staleness limits and the estimator's counts are sized from the latter)."""
-        measured = self.measured_period_s
-        nominal = self.declared_period_s
-        return measured is not None and not 0.6 * nominal <= measured <= 1.6 * nominal
-
-    # -- staleness ---------------------------------------------------------------------------
-    def stale_messages(self, now_s: float) -> tuple[str, ...]:
-        """Required messages whose last frame is older than `stale_periods` of their period."""
-        limit = self.options.stale_periods
-        stale = []
-        for m, h in self._required_histories:   # (in name order: the result comes sorted)
-            if now_s - h.last_arrival_s > limit * h.period_s + 1e-3:
-                stale.append(m)
-        return tuple(stale)
-
     def period_of(self, message: str) -> float:
         return self._history[message].period_s
-
-    def tainted(self, time_s: float) -> bool:
-        """Whether a sample at `time_s` may have used an input value found wrong after it was
-        made (a spike the next frame showed up: `InputGate.repaired`)."""
-        spans = self.gate.repaired
-        while spans and spans[0][1] < time_s - 1.0:
-            spans.popleft()
-        return any(a < time_s < b for a, b in spans)
 
     # -- main entry --------------------------------------------------------------------------
     def push(self, time_s: float, message: str, values: Mapping[str, float]) -> FrontEndResult | None:
@@ -521,7 +493,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         stuck = [n >= opts.stuck_frames for n in self._repeats] if abs(accel_long_raw) > 0.5 else [False] * 4
         braked = [p - veh.brake_pushout_pressure > opts.min_brake_pressure for p in pressures]  # type: ignore[operator]
         dead = self._dead_wheels(t_c, wheel_linear, braked)
-        wheel_linear = _stood_in_for([st or d for st, d in zip(stuck, dead)], wheel_linear)
+        wheel_linear = stood_in_for([st or d for st, d in zip(stuck, dead)], wheel_linear)
         braking = any(braked)
         if not braking:
             self._brake_released = False    # (a new stop: the master pressure is the wheels' again)
@@ -585,21 +557,6 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
                  else "brake pressure disagrees with deceleration")
         return FrontEndResult(sample, stale, fault, tuple(i for i in range(4) if dead[i]))
 
-    def _deceleration_unexplained(self, t_c: float, torqued: bool, accel_long: float, omega_dot: list[float]) -> bool:
-        """Plausibility of the brake pressures against the body: a hard deceleration for 0.1 s with
-        no pressure anywhere (and no drive torque to explain it) means the pressure signals are
-        wrong, and every brake torque computed from them would be too. Unless the wheels are
-        spinning back up: an ABS that released every wheel from deep slip at once leaves the
-        road's force on them, J·ω̇/R each, braking the car for a few tenths of a second."""
-        veh = self.vehicle
-        spin_up = veh.wheel_inertia * sum(a for a in omega_dot if a > 0.0) / (veh.wheel_radius * veh.mass)
-        if not torqued and accel_long + spin_up < -self.options.unexplained_decel:
-            self._unexplained_s += max(0.0, t_c - self._last_sample_time_s) if self._last_sample_time_s else 0.0
-        else:
-            self._unexplained_s = 0.0
-        self._last_sample_time_s = t_c
-        return self._unexplained_s > 0.1
-
     def _speed_and_offset(self, t_c: float, wheel_linear: list[float], omega_dot: list[float],
                           accel_long: float, accel_long_raw: float, torqued: bool) -> tuple[float, bool]:
         """The ground speed (and whether from the car's reference) after this sample; while the
@@ -627,57 +584,8 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
             slips.append((ground - wheel_linear[i]) / denom if denom > 0.1 else 0.0)
         return slips
 
-    def _dead_wheels(self, time_s: float, wheel_linear: list[float], braked: list[bool]) -> list[bool]:
-        """Wheels whose sensor reads (near) zero while the others say the car rolls on.
-
-        A wheel far below the others is either locked by its brake or its sensor is dead (a
-        broken wire reads 0). A lock needs brake pressure, and an ABS releases a locking wheel
-        within a fraction of a second (ice included: the pressure is dumped, the road spins the
-        wheel up again). So: far below the other wheels for longer than `dead_wheel_s`, or for
-        `dead_wheel_unbraked_s` with no pressure on that wheel, is a dead sensor. It stays dead
-        until its reading agrees with the others again (at a standstill all read zero, which
-        proves nothing either way). Without ABS a wheel locked for longer is also reported: its
-        slip is beyond `max_slip` then, so it is out of the fit anyway.
-        """
-        opts = self.options
-        out = [False] * 4
-        for i in range(4):
-            others = max(wheel_linear[:i] + wheel_linear[i + 1:])
-            w = wheel_linear[i]
-            if self._dead[i]:
-                if w > 0.5 * others and w > 0.3:
-                    self._dead[i] = False
-                    self._low_since_s[i] = None
-                    self._low_unbraked_s[i] = 0.0
-                out[i] = self._dead[i]
-                continue
-            low = others >= opts.min_speed and w < opts.dead_wheel_ratio * others
-            if not low:
-                self._low_since_s[i] = None
-                self._low_unbraked_s[i] = 0.0
-                continue
-            since = self._low_since_s[i]
-            if since is None or time_s < since:
-                self._low_since_s[i] = since = time_s
-                self._low_unbraked_s[i] = 0.0
-            elif not braked[i] and self._last_sample_time_s is not None:
-                self._low_unbraked_s[i] += max(0.0, min(time_s - self._last_sample_time_s, opts.max_gap))
-            if time_s - since > opts.dead_wheel_s or self._low_unbraked_s[i] > opts.dead_wheel_unbraked_s:
-                self._dead[i] = out[i] = True
-        return out
-
 # Rejections of a trigger frame that give no output at all (its time is not the bus's).
 _NO_OUTPUT = frozenset({"clock step", "out of order", "duplicate"})
-
-
-def _stood_in_for(failed: list[bool], wheel_linear: list[float]) -> list[float]:
-    """The wheels' speeds with the slowest working wheel standing in for a stuck or dead sensor:
-    a dead one's zero would drag the free-rolling observer, which pulls towards the wheels'
-    mean, down by a quarter. (All failed: nothing to stand in.)"""
-    if not any(failed) or all(failed):
-        return wheel_linear
-    slowest_ok = min(w for w, f in zip(wheel_linear, failed) if not f)
-    return [slowest_ok if f else w for w, f in zip(wheel_linear, failed)]
 
 
 def _input_label(signals: Iterable[str]) -> str:

@@ -16,10 +16,12 @@ from .samples import PhysicalSample
 
 @dataclass(frozen=True, slots=True)
 class SpeedErrorOptions:
-    error_mps: float = 0.02         # the estimate's error while anchored
-    drift_mps2: float = 0.02        # ... growing this fast while it coasts (the offset's error)
-    anchor_slip: float = 0.01       # anchored: the second-least-slipping wheel within this slip of it
-    window_s: float = 0.3           # the span over which a spread of slips is read
+    """Set from the estimator's options (`LugreTROptions.speed_error_mps` and its neighbours)."""
+
+    error_mps: float                # the estimate's error while anchored
+    drift_mps2: float               # ... growing this fast while it coasts (the offset's error)
+    anchor_slip: float              # anchored: the second-least-slipping wheel within this slip of it
+    window_s: float                 # the span over which a spread of slips is read
 
 
 class SpeedErrorBound:

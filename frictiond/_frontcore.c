@@ -1226,6 +1226,187 @@ static int intern_attributes(void)
     return 0;
 }
 
+
+/* ---- the tyre's relaxation (relaxation.RelaxationCompensator) ---------------------------- */
+
+#define RELAX_COLUMNS 9
+
+/* numpy.searchsorted(edges, x) (side "left"): a NaN sorts past every edge. */
+static Py_ssize_t search_left(const double *edges, Py_ssize_t n, double x)
+{
+    if (x != x)
+        return n;
+    Py_ssize_t lo = 0, hi = n;
+    while (lo < hi) {
+        const Py_ssize_t mid = (lo + hi) / 2;
+        if (edges[mid] < x)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+/* relaxation_step(sums, edges, memory_s, time_s, last_learnt_s, learn, lag, dt, speed, slips,
+ *                 mu_before, mu, mu_after, usable_before, usable, usable_after, normal_forces,
+ *                 tyre_forces)
+ * -> (last_learnt_s, mus, forces): RelaxationCompensator._corrected's loop over the wheels and
+ * its `_learn` (sums updated in place; last_learnt_s NaN for none yet). mus and forces are None
+ * where no wheel was corrected. */
+static PyObject *py_relaxation_step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (!arg_count("relaxation_step", nargs, 18))
+        return NULL;
+    double memory_s, time_s, last, lag, dt, speed;
+    double slip[4], mu_b[4], mu_s[4], mu_a[4], fz[4], forces[4];
+    int learn, use[4];
+    if (!arg_double(args[2], &memory_s) || !arg_double(args[3], &time_s) || !arg_double(args[4], &last)
+        || !arg_bool(args[5], &learn) || !arg_double(args[6], &lag) || !arg_double(args[7], &dt)
+        || !arg_double(args[8], &speed) || !arg_doubles(args[9], slip, 4, "slips")
+        || !arg_doubles(args[10], mu_b, 4, "mu_before") || !arg_doubles(args[11], mu_s, 4, "mu")
+        || !arg_doubles(args[12], mu_a, 4, "mu_after") || !arg_doubles(args[16], fz, 4, "normal_forces")
+        || !arg_doubles(args[17], forces, 4, "tyre_forces"))
+        return NULL;
+    for (int i = 0; i < 4; i++) {
+        use[i] = 1;
+        for (int k = 13; k <= 15; k++) {
+            PyObject *item = PySequence_GetItem(args[k], i);
+            if (!item)
+                return NULL;
+            const int truth = PyObject_IsTrue(item);
+            Py_DECREF(item);
+            if (truth < 0)
+                return NULL;
+            use[i] = use[i] && truth;
+        }
+    }
+    Buf b[2];
+    memset(b, 0, sizeof b);
+    if (get_array(args[0], &b[0], "sums", -1, 1, 0) < 0 || get_array(args[1], &b[1], "edges", -1, 0, 0) < 0) {
+        release_all(b, 2);
+        return NULL;
+    }
+    double *sums = b[0].view.buf;
+    const double *edges = b[1].view.buf;
+    const Py_ssize_t n_edges = b[1].view.len / 8, n_sums = b[0].view.len / 8;
+    if (n_sums != (n_edges + 1) * RELAX_COLUMNS) {
+        release_all(b, 2);
+        PyErr_SetString(PyExc_ValueError, "sums: expected (len(edges) + 1) rows of 9");
+        return NULL;
+    }
+    double mus[4];
+    int changed = 0;
+    for (int i = 0; i < 4; i++) {
+        mus[i] = mu_s[i];
+        if (!use[i])
+            continue;
+        const double rate = (mu_a[i] - mu_b[i]) / dt;
+        if (!isfinite(rate))
+            continue;
+        if (learn && isfinite(mu_s[i]) && isfinite(slip[i])) {
+            if (last == last && time_s > last) {
+                const double keep = exp(-(time_s - last) / memory_s);
+                for (Py_ssize_t k = 0; k < n_sums; k++)
+                    sums[k] *= keep;
+            }
+            last = time_s;
+            const double z = rate / speed, l = slip[i], m = mu_s[i];
+            double *row = sums + search_left(edges, n_edges, l) * RELAX_COLUMNS;
+            const double add[RELAX_COLUMNS] = {1.0, l, l * l, z, z * z, z * l, m, m * l, m * z};
+            for (int k = 0; k < RELAX_COLUMNS; k++)
+                row[k] += add[k];
+        }
+        if (lag > 0.0) {
+            mus[i] = mu_s[i] + lag * rate;
+            forces[i] = mus[i] * fz[i];
+            changed = 1;
+        }
+    }
+    release_all(b, 2);
+    PyObject *last_obj = PyFloat_FromDouble(last);
+    if (!last_obj)
+        return NULL;
+    if (!changed)
+        return Py_BuildValue("(NOO)", last_obj, Py_None, Py_None);
+    return Py_BuildValue("(NNN)", last_obj, tuple_of(mus, 4), tuple_of(forces, 4));
+}
+
+
+/* numpy's sum of a float64 array, to the last bit: pairwise, eight accumulators within a block
+ * (the arrays here are far shorter than numpy's 128-value block). */
+static double numpy_sum(const double *a, Py_ssize_t n)
+{
+    if (n < 8) {
+        double res = 0.0;
+        for (Py_ssize_t i = 0; i < n; i++)
+            res += a[i];
+        return res;
+    }
+    if (n > 128) {
+        const Py_ssize_t half = (n / 2) - (n / 2) % 8;
+        return numpy_sum(a, half) + numpy_sum(a + half, n - half);
+    }
+    double r[8];
+    for (int j = 0; j < 8; j++)
+        r[j] = a[j];
+    Py_ssize_t i;
+    for (i = 8; i < n - (n % 8); i += 8)
+        for (int j = 0; j < 8; j++)
+            r[j] += a[i + j];
+    double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+    for (; i < n; i++)
+        res += a[i];
+    return res;
+}
+
+/* relaxation_sigma(sums, min_band_samples, min_evidence_samples, max_sigma) -> float:
+ * RelaxationCompensator._fitted_sigma. */
+static PyObject *py_relaxation_sigma(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (!arg_count("relaxation_sigma", nargs, 4))
+        return NULL;
+    double min_band, min_evidence, max_sigma;
+    if (!arg_double(args[1], &min_band) || !arg_double(args[2], &min_evidence) || !arg_double(args[3], &max_sigma))
+        return NULL;
+    Buf b;
+    memset(&b, 0, sizeof b);
+    if (get_array(args[0], &b, "sums", -1, 0, 0) < 0) {
+        release_all(&b, 1);
+        return NULL;
+    }
+    const double *sums = b.view.buf;
+    const Py_ssize_t rows = b.view.len / 8 / RELAX_COLUMNS;
+    double count[64], var_z[64], cov_zm[64];
+    Py_ssize_t k = 0;
+    for (Py_ssize_t r = 0; r < rows && k < 64; r++) {
+        const double *q = sums + r * RELAX_COLUMNS;
+        if (!(q[0] >= min_band))
+            continue;
+        const double n = q[0], sl = q[1], sll = q[2], sz = q[3], szz = q[4], szl = q[5], sm = q[6], sml = q[7],
+                     smz = q[8];
+        const double var_l = sll - sl * sl / n, cov_zl = szl - sz * sl / n, cov_ml = sml - sm * sl / n;
+        const double inv = var_l > 1e-12 ? 1.0 / var_l : 0.0;
+        count[k] = n;
+        var_z[k] = szz - sz * sz / n - cov_zl * cov_zl * inv;
+        cov_zm[k] = smz - sz * sm / n - cov_zl * cov_ml * inv;
+        k++;
+    }
+    release_all(&b, 1);
+    if (rows > 64) {
+        PyErr_SetString(PyExc_ValueError, "sums: at most 64 bands");
+        return NULL;
+    }
+    if (k == 0)
+        return PyFloat_FromDouble(0.0);
+    const double den = numpy_sum(var_z, k);
+    if (!(den > 0.0) || numpy_sum(count, k) < min_evidence)
+        return PyFloat_FromDouble(0.0);
+    const double sigma = -numpy_sum(cov_zm, k) / den;
+    return PyFloat_FromDouble(isfinite(sigma) ? py_min(py_max(sigma, 0.0), max_sigma) : 0.0);
+}
+
 static PyMethodDef methods[] = {
     {"fit_wheels", py_fit_wheels, METH_VARARGS,
      "fit_wheels(times, speeds, spike_threshold, torque_window)\n"
@@ -1247,6 +1428,13 @@ static PyMethodDef methods[] = {
      "sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,\n"
      "wheel_times, torque_weights, ref, ref_fresh, torque_omega_dot) -> FrontEndResult: FrontEnd._compute_sample after the\n"
      "fit and the inputs, reading and updating the FrontEnd's state attributes."},
+    {"relaxation_step", (PyCFunction)(void (*)(void))py_relaxation_step, METH_FASTCALL,
+     "relaxation_step(sums, edges, memory_s, time_s, last_learnt_s, learn, lag, dt, speed, slips, mu_before,\n"
+     "mu, mu_after, usable_before, usable, usable_after, normal_forces, tyre_forces) -> (last_learnt_s, mus, forces):\n"
+     "RelaxationCompensator._corrected's wheels (sums updated in place; mus, forces None if none corrected)."},
+    {"relaxation_sigma", (PyCFunction)(void (*)(void))py_relaxation_sigma, METH_FASTCALL,
+     "relaxation_sigma(sums, min_band_samples, min_evidence_samples, max_sigma) -> float:\n"
+     "RelaxationCompensator._fitted_sigma."},
     {NULL, NULL, 0, NULL},
 };
 

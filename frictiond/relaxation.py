@@ -26,6 +26,11 @@ import numpy as np
 
 from .samples import PhysicalSample
 
+try:
+    from . import _frontcore as compiled_front
+except ImportError:  # pragma: no cover - the build without a C compiler
+    compiled_front = None
+
 # Slip bands of the σ regression: narrow enough that the static curve is nearly straight in each
 # (a peak on ice at 2 % slip, on dry asphalt at 10–20 %), log-spaced.
 SLIP_BANDS = np.concatenate(([0.0], np.geomspace(0.005, 1.0, 30)))
@@ -50,6 +55,7 @@ class RelaxationCompensator:
 
     def __init__(self, enabled: bool = True) -> None:
         self.enabled = enabled
+        self.core = compiled_front    # `_corrected`'s wheels compiled (same numbers); None: Python
         self._sums = np.zeros((len(SLIP_BANDS) + 1, 9))
         self._last_learnt_s: float | None = None
         self._since_sigma = 0
@@ -81,6 +87,17 @@ class RelaxationCompensator:
         speed = max(sample.speed_mps, MIN_SPEED_MPS)
         learn = sample.speed_mps > MIN_SPEED_MPS
         lag = min(self.sigma_m / speed, MAX_LAG_S)
+        if self.core is not None:
+            last = self._last_learnt_s
+            last, mus, forces = self.core.relaxation_step(
+                self._sums, SLIP_BANDS, MEMORY_S, sample.time_s, math.nan if last is None else last, learn,
+                lag, dt, speed, sample.slip, before.mu_used, sample.mu_used, after.mu_used, before.usable,
+                sample.usable, after.usable, sample.normal_force_n, sample.tyre_force_n)
+            self._last_learnt_s = None if math.isnan(last) else last
+            self._count_for_sigma(learn)
+            if mus is None:
+                return sample
+            return replace(sample, mu_used=mus, tyre_force_n=forces)
         mus = list(sample.mu_used)
         forces = list(sample.tyre_force_n)
         changed = False
@@ -90,20 +107,24 @@ class RelaxationCompensator:
             rate = (after.mu_used[i] - before.mu_used[i]) / dt
             if not math.isfinite(rate):
                 continue
-            if learn:
+            # (a NaN in the regression's sums would stay there, through every forgetting)
+            if learn and math.isfinite(sample.mu_used[i]) and math.isfinite(sample.slip[i]):
                 self._learn(sample.time_s, sample.slip[i], sample.mu_used[i], rate / speed)
             if lag > 0.0:
                 mus[i] = sample.mu_used[i] + lag * rate
                 forces[i] = mus[i] * sample.normal_force_n[i]
                 changed = True
+        self._count_for_sigma(learn)
+        if not changed:
+            return sample
+        return replace(sample, mu_used=tuple(mus), tyre_force_n=tuple(forces))  # type: ignore[arg-type]
+
+    def _count_for_sigma(self, learn: bool) -> None:
         if learn:
             self._since_sigma += 1
             if self._since_sigma >= SIGMA_EVERY:
                 self._since_sigma = 0
                 self.sigma_m = self._fitted_sigma()
-        if not changed:
-            return sample
-        return replace(sample, mu_used=tuple(mus), tyre_force_n=tuple(forces))  # type: ignore[arg-type]
 
     def _learn(self, time_s: float, slip: float, mu: float, rate_per_speed: float) -> None:
         if self._last_learnt_s is not None and time_s > self._last_learnt_s:
@@ -117,6 +138,8 @@ class RelaxationCompensator:
         """σ from the bands' sums: per band, μ and z = μ̇/v with their straight lines in λ taken
         out; the least-squares σ = −Σ cov(z, μ) / Σ var(z) over the bands with enough samples
         (0 until there are `MIN_EVIDENCE_SAMPLES` of them)."""
+        if self.core is not None:
+            return self.core.relaxation_sigma(self._sums, MIN_BAND_SAMPLES, MIN_EVIDENCE_SAMPLES, MAX_SIGMA_M)
         s = self._sums[self._sums[:, 0] >= MIN_BAND_SAMPLES]
         if not len(s):
             return 0.0

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from frictiond import relaxation as relaxation_module
 from frictiond.relaxation import RelaxationCompensator
 from frictiond.samples import PhysicalSample, Status
 
@@ -97,6 +98,53 @@ def test_each_sample_passes_once_one_late_and_gaps_pass_uncorrected():
         assert out[k].mu_used[1] == samples[k].mu_used[1]
     assert out[100].mu_used[0] != samples[100].mu_used[0]
     assert out[100].tyre_force_n[0] == pytest.approx(out[100].mu_used[0] * LOAD)
+
+
+@pytest.mark.skipif(relaxation_module.compiled_front is None,
+                    reason="not built (test_frontcore's test_the_compiled_front_end_is_built fails instead)")
+def test_the_compiled_wheels_say_what_the_python_ones_say_to_the_last_bit():
+    """`_frontcore.relaxation_step` and `relaxation_sigma` against `_corrected`'s Python loop and
+    `_fitted_sigma`: every sample, σ and the regression's sums equal, over a stop whose speed falls
+    below `MIN_SPEED_MPS` (learning stops), with a gap, unusable wheels and a NaN μ."""
+    samples, _ = _abs_samples(sigma_m=0.35, seconds=3.0, seed=11)
+    rng = np.random.default_rng(5)
+    varied = []
+    for k, s in enumerate(samples):
+        speed = 25.0 - 7.5 * s.time_s                               # 25 → 2.5 m/s
+        mu = tuple(m * f for m, f in zip(s.mu_used, (1.0, 0.93, 1.05, 0.88)))
+        slip = tuple(x * f for x, f in zip(s.slip, (1.0, 1.1, 0.9, 1.2)))
+        usable = tuple(bool(u) for u in rng.random(4) > 0.03)
+        if k == 77:
+            mu = (math.nan,) + mu[1:]
+        time_s = s.time_s + (0.2 if k >= 200 else 0.0)
+        varied.append(PhysicalSample(time_s, speed, slip, mu, s.normal_force_n,
+                                     tuple(m * LOAD for m in mu), usable, True))
+    compiled, floats = RelaxationCompensator(), RelaxationCompensator()
+    floats.core = None
+    corrected = 0
+    for s in varied:
+        a, b = compiled.push(s), floats.push(s)
+        assert (a is None) == (b is None)
+        if a is not None:
+            assert a.time_s == b.time_s
+            assert np.array_equal(a.mu_used, b.mu_used, equal_nan=True)
+            assert np.array_equal(a.tyre_force_n, b.tyre_force_n, equal_nan=True)
+            corrected += a.mu_used != s.mu_used
+        assert compiled.sigma_m == floats.sigma_m
+        assert np.array_equal(compiled._sums, floats._sums, equal_nan=True)
+    # The lag was learnt and inverted, the NaN μ notwithstanding (in the sums it would end the learning).
+    assert compiled.sigma_m > 0.1 and corrected > 100
+
+
+@pytest.mark.skipif(relaxation_module.compiled_front is None, reason="not built")
+def test_the_compiled_step_refuses_sums_of_the_wrong_shape():
+    core = relaxation_module.compiled_front
+    four = (0.1, 0.1, 0.1, 0.1)
+    with pytest.raises(ValueError, match="rows of 9"):
+        core.relaxation_step(np.zeros((5, 9)), relaxation_module.SLIP_BANDS, 3.0, 1.0, math.nan, True, 0.01,
+                             0.02, 10.0, four, four, four, four, (True,) * 4, (True,) * 4, (True,) * 4, four, four)
+    with pytest.raises(TypeError, match="float64"):
+        core.relaxation_sigma(np.zeros((32, 9), dtype=np.float32), 6, 200, 1.0)
 
 
 def test_disabled_passes_every_sample_at_once():

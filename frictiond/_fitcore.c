@@ -1111,6 +1111,87 @@ out:
     return result;
 }
 
+
+/* excess_over_fit(scratch, slip, wheel, lo, hi, wheel_mu, fitted_mu, peak_slip, edges, min_n) -> float:
+   EstimateConfidence._excess_over_fit over the window's samples [lo, hi). scratch: the window's
+   (4, capacity) scratch, row 0 the weighted model − data, row 3 the weights. Per band of slips
+   (multiples of each wheel's peak slip; band 0 below the first edge never counts), the mean of
+   (data − model − lift) / published peak (published: wheel_mu, at least 1e-3; the lift: that
+   less fitted_mu); the highest over bands of min_n samples or more, at least 0. The same sums in the same order as numpy's bincount. */
+static PyObject *py_excess_over_fit(PyObject *self, PyObject *args)
+{
+    (void)self;
+    PyObject *o_scratch, *o_slip, *o_wheel, *o_published, *o_lift, *o_peak_slip, *o_edges;
+    Py_ssize_t lo, hi, min_n;
+    if (!PyArg_ParseTuple(args, "OOOnnOOOOn:excess_over_fit", &o_scratch, &o_slip, &o_wheel, &lo, &hi,
+                          &o_published, &o_lift, &o_peak_slip, &o_edges, &min_n))
+        return NULL;
+    double published[MAX_POINTS], lift[MAX_POINTS], peak_slip[MAX_POINTS], edges[MAX_POINTS];
+    if (floats(o_published, published, "wheel_mu") != NW || floats(o_lift, lift, "fitted_mu") != NW
+        || floats(o_peak_slip, peak_slip, "peak_slip") != NW) {
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "excess_over_fit: one peak per wheel");
+        return NULL;
+    }
+    const Py_ssize_t n_edges = floats(o_edges, edges, "edges");
+    if (n_edges < 0)
+        return NULL;
+    Buf b[3];
+    memset(b, 0, sizeof b);
+    PyObject *result = NULL;
+    if (get_array(o_scratch, &b[0], "scratch", -1, 0, 0) < 0 || get_array(o_slip, &b[1], "slip", -1, 0, 0) < 0
+        || get_array(o_wheel, &b[2], "wheel", -1, 0, 1) < 0)
+        goto out;
+    const Py_ssize_t cap = b[1].view.len / 8;
+    if (b[0].view.len / 8 != 4 * cap || b[2].view.len / (Py_ssize_t)sizeof(Py_ssize_t) != cap) {
+        PyErr_SetString(PyExc_ValueError, "excess_over_fit: scratch must be (4, capacity), wheel (capacity,)");
+        goto out;
+    }
+    if (lo < 0 || hi < lo || hi > cap) {
+        PyErr_SetString(PyExc_ValueError, "excess_over_fit: lo, hi outside the window");
+        goto out;
+    }
+    const double *model_minus_weighted = b[0].view.buf, *weights = model_minus_weighted + 3 * cap;
+    const double *slip = b[1].view.buf;
+    const Py_ssize_t *wheel = b[2].view.buf;
+    for (int w = 0; w < NW; w++) {
+        peak_slip[w] = py_max(peak_slip[w], 1e-3);
+        published[w] = py_max(published[w], 1e-3);
+        lift[w] = published[w] - lift[w];
+    }
+    double sums[MAX_POINTS + 1] = {0.0};
+    Py_ssize_t counts[MAX_POINTS + 1] = {0};
+    for (Py_ssize_t j = lo; j < hi; j++) {
+        const Py_ssize_t w = wheel[j];
+        if (w < 0 || w >= NW)
+            continue;
+        const double model_minus_data = weights[j] > 0.0 ? model_minus_weighted[j] / weights[j] : 0.0;
+        const double excess = (-model_minus_data - lift[w]) / published[w];
+        const double at = slip[j] / peak_slip[w];
+        Py_ssize_t band = 0;
+        if (isnan(at))
+            band = n_edges;   /* (numpy's searchsorted puts NaN past every edge) */
+        else
+            while (band < n_edges && edges[band] <= at)
+                band++;
+        sums[band] += excess;
+        counts[band]++;
+    }
+    double best = 0.0;
+    int found = 0;
+    for (Py_ssize_t k = 1; k <= n_edges; k++)
+        if (counts[k] >= min_n) {
+            const double mean = sums[k] / (double)counts[k];
+            if (!found || mean > best || isnan(mean))
+                best = isnan(best) ? best : mean;   /* (numpy's max: a NaN wins) */
+            found = 1;
+        }
+    result = PyFloat_FromDouble(found && best > 0.0 ? best : 0.0);
+out:
+    release_all(b, 3);
+    return result;
+}
+
 static PyObject *py_data_peaks(PyObject *self, PyObject *args)
 {
     (void)self;
@@ -1883,6 +1964,9 @@ static PyMethodDef methods[] = {
     {"wheel_stats", py_wheel_stats, METH_VARARGS,
      "wheel_stats(slip, mu, wheel, times, lag, elasticity) -> 4 tuples of 12 floats\n\n"
      "estimator._wheel_stats_numpy: n, q10, q90, lam_lo, lam_hi, mu_hi, run-away rate, s2, s3, s4, y1, y2."},
+    {"excess_over_fit", py_excess_over_fit, METH_VARARGS,
+     "excess_over_fit(scratch, slip, wheel, lo, hi, wheel_mu, fitted_mu, peak_slip, edges, min_n) -> float\n\n"
+     "EstimateConfidence._excess_over_fit's band means over the window's samples [lo, hi)."},
     {"band_ratio", py_band_ratio, METH_VARARGS,
      "band_ratio(slip, mu, wheel, lo, hi, peak_mu, peak_slip, edges, min_n) -> float\n\n"
      "EstimateConfidence._band_ratio_of's band means over the window's samples [lo, hi)."},

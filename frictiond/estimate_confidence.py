@@ -24,6 +24,7 @@ _MISFIT_SLIP_BANDS = np.array([0.5, 0.75, 0.9, 1.1, 1.4, 2.0, 3.0])
 # The bands of `_band_ratio_of`: those of them from 0.75 to 2 times the peak slip.
 _BAND_FLOOR_SLIPS = _MISFIT_SLIP_BANDS[1:6]
 _BAND_FLOOR_EDGES = tuple(_BAND_FLOOR_SLIPS.tolist())
+_MISFIT_EDGES = tuple(_MISFIT_SLIP_BANDS.tolist())
 
 
 def _data_peaks_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, k: int, min_samples: int,
@@ -73,6 +74,23 @@ def _band_means(edges: np.ndarray, at: np.ndarray, values: np.ndarray,
     counts = np.bincount(band, minlength=len(edges) + 1)
     sums = np.bincount(band, weights=values, minlength=len(edges) + 1)
     return np.divide(sums, counts, out=np.zeros(len(counts)), where=counts > 0), counts >= min_samples
+
+
+def excess_over_fit_numpy(model_minus_data: np.ndarray, slip: np.ndarray, wheel: np.ndarray,
+                          wheel_mu: Sequence[float], fitted_mu: Sequence[float], wheel_lam: Sequence[float],
+                          min_samples: int) -> float:
+    """`EstimateConfidence._excess_over_fit` on the samples given (model − data per sample);
+    `_fitcore.excess_over_fit` is the same, compiled."""
+    published = np.maximum(np.asarray(wheel_mu, dtype=float), 1e-3)
+    lift = published - np.asarray(fitted_mu, dtype=float)
+    peak_mu = published[wheel]
+    peak_slip = np.maximum(np.asarray(wheel_lam, dtype=float), 1e-3)[wheel]
+    excess = (-model_minus_data - lift[wheel]) / peak_mu
+    means, full = _band_means(_MISFIT_SLIP_BANDS, slip / peak_slip, excess, min_samples)
+    full[0] = False   # (below half the peak slip: the slip stiffness and the pedal's transient, not the peak)
+    if not full.any():
+        return 0.0
+    return max(0.0, float(means[full].max()))
 
 
 class EstimateConfidence:
@@ -292,21 +310,9 @@ class EstimateConfidence:
         if hi - lo < self.options.misfit_bin_samples:
             return 0.0
         if self.core is not None:
-            sw = w.scratch[3, lo:hi]
-            model_minus_data = np.divide(w.scratch[0, lo:hi], sw, out=np.zeros(hi - lo), where=sw > 0)
-        elif self._numpy_residuals is not None and len(self._numpy_residuals) == hi - lo:
-            model_minus_data = self._numpy_residuals
-        else:
+            return self.core.excess_over_fit(w.scratch, w.slip, w.wheel, lo, hi, wheel_mu, fitted_mu, wheel_lam,
+                                             _MISFIT_EDGES, self.options.misfit_bin_samples)
+        if self._numpy_residuals is None or len(self._numpy_residuals) != hi - lo:
             return 0.0
-        wheel = w.wheel[lo:hi]
-        published = np.maximum(np.asarray(wheel_mu, dtype=float), 1e-3)
-        lift = published - np.asarray(fitted_mu, dtype=float)
-        peak_mu = published[wheel]
-        peak_slip = np.maximum(np.asarray(wheel_lam, dtype=float), 1e-3)[wheel]
-        excess = (-model_minus_data - lift[wheel]) / peak_mu
-        means, full = _band_means(_MISFIT_SLIP_BANDS, w.slip[lo:hi] / peak_slip, excess,
-                                  self.options.misfit_bin_samples)
-        full[0] = False   # (below half the peak slip: the slip stiffness and the pedal's transient, not the peak)
-        if not full.any():
-            return 0.0
-        return max(0.0, float(means[full].max()))
+        return excess_over_fit_numpy(self._numpy_residuals, w.slip[lo:hi], w.wheel[lo:hi], wheel_mu, fitted_mu,
+                                     wheel_lam, self.options.misfit_bin_samples)

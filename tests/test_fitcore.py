@@ -618,6 +618,39 @@ def test_band_ratio_compiled_equals_numpy():
     assert found > 200   # (most windows have a full band: the comparison is not of zeros)
 
 
+def test_excess_over_fit_compiled_equals_numpy():
+    # Random windows and residuals, some weights zero (no residual: counted as 0), peaks at the
+    # 1e-3 floor, a NaN slip among them, bands short of samples: `_excess_over_fit`'s compiled sums
+    # against its numpy form, fed what the compiled fit leaves in the window's scratch.
+    from frictiond.estimate_confidence import _MISFIT_EDGES, excess_over_fit_numpy
+
+    rng = np.random.default_rng(17)
+    found = 0
+    for trial in range(500):
+        lo, n, slip, _, wheel = _random_window(rng, 512, 300, 3)
+        if n and trial % 7 == 0:
+            slip[lo + int(rng.integers(0, n))] = np.nan
+        scratch = np.full((4, 512), np.nan)
+        scratch[3, lo:lo + n] = np.where(rng.random(n) < 0.1, 0.0, rng.random(n) * 20.0)
+        scratch[0, lo:lo + n] = rng.normal(-0.03, 0.05, n) * scratch[3, lo:lo + n]   # (data above the model)
+        wheel_mu = (0.05 + rng.random(4)).tolist()
+        fitted_mu = [m - float(rng.random()) * 0.05 for m in wheel_mu]
+        wheel_lam = (rng.random(4) * (0.2 if trial % 5 else 0.0005)).tolist()
+        min_n = int(rng.integers(1, 30))
+        got = core.excess_over_fit(scratch, slip, wheel, lo, lo + n, wheel_mu, fitted_mu, wheel_lam, _MISFIT_EDGES, min_n)
+        sw = scratch[3, lo:lo + n]
+        model_minus_data = np.divide(scratch[0, lo:lo + n], sw, out=np.zeros(n), where=sw > 0)
+        want = excess_over_fit_numpy(model_minus_data, slip[lo:lo + n], wheel[lo:lo + n], wheel_mu, fitted_mu,
+                                     wheel_lam, min_n) if n else 0.0
+        assert got == want, (trial, got, want)
+        found += got > 0
+    assert found > 150   # (most windows have data above the fit somewhere: not a comparison of zeros)
+    with pytest.raises(ValueError, match="capacity"):
+        core.excess_over_fit(np.zeros((3, 512)), slip, wheel, 0, 10, wheel_mu, fitted_mu, wheel_lam, _MISFIT_EDGES, 5)
+    with pytest.raises(ValueError, match="outside the window"):
+        core.excess_over_fit(scratch, slip, wheel, 10, 600, wheel_mu, fitted_mu, wheel_lam, _MISFIT_EDGES, 5)
+
+
 def test_top_elasticity_compiled_equals_numpy():
     # Random windows: some wheels with too few samples, slips with ties (a quantile on a tie),
     # since before, inside and after the window.

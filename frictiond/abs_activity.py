@@ -83,23 +83,32 @@ class AbsActivity:
     def _released(self, time_s: float, pressures: tuple[float | None, ...],
                   master_bar: float | None) -> tuple[bool, bool, bool, bool]:
         o = self.options
-        if any(p is None or not math.isfinite(p) for p in pressures):
-            return NO_ACTIVITY
+        for p in pressures:
+            if p is None or not math.isfinite(p):
+                return NO_ACTIVITY
         now = [float(p) for p in pressures]  # type: ignore[arg-type]
         has_master = master_bar is not None and math.isfinite(master_bar)
         demand = float(master_bar) if has_master else max(now)  # type: ignore[arg-type]
         since = time_s - o.window_s
-        maxima = [_running_max(q, time_s, value, since) for q, value in zip(self._maxima, now + [demand])]
-        if demand < o.demand_kept_ratio * maxima[4]:
+        queues = self._maxima
+        maxima = [_running_max(queues[i], time_s, now[i], since) for i in range(4)]
+        demand_max = _running_max(queues[4], time_s, demand, since)
+        if demand < o.demand_kept_ratio * demand_max:
             return NO_ACTIVITY      # the driver is letting go: every pressure falls, none is a release
-        fallen = [(m - p) / m if m > 0.0 else 0.0 for m, p in zip(maxima, now + [demand])]
+        fallen = [(m - p) / m if m > 0.0 else 0.0 for m, p in zip(maxima, now)]
+        demand_fallen = (demand_max - demand) / demand_max if demand_max > 0.0 else 0.0
+        min_pressure, min_drop, min_ratio, min_relative = (o.min_pressure_bar, o.min_drop_bar, o.min_drop_ratio,
+                                                           o.min_relative_drop)
         out = []
         for i in range(4):
-            peak, drop = maxima[i], maxima[i] - now[i]
+            peak = maxima[i]
+            drop = peak - now[i]
+            if not (peak >= min_pressure and drop >= min_drop):
+                out.append(False)
+                continue
             # What the pedal took off every wheel: the master's fall, else the other wheels' least.
-            pedal = fallen[4] if has_master else min(fallen[j] for j in range(4) if j != i)
-            out.append(peak >= o.min_pressure_bar and drop >= o.min_drop_bar
-                       and (drop >= o.min_drop_ratio * peak or fallen[i] - pedal >= o.min_relative_drop))
+            pedal = demand_fallen if has_master else min([fallen[j] for j in range(4) if j != i])
+            out.append(drop >= min_ratio * peak or fallen[i] - pedal >= min_relative)
         return tuple(out)  # type: ignore[return-value]
 
 

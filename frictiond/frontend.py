@@ -230,9 +230,6 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         self._has_ref_speed = "vehicle_speed_ref" in self._signal_message
         self._has_drive_torque = all(n in self._signal_message for n in DRIVE_TORQUE_NAMES)
         self._has_yaw_rate = "yaw_rate" in self._signal_message
-        self._has_master_pressure = MASTER_PRESSURE_NAME in self._signal_message
-        self._has_abs_flag = "abs_active" in self._signal_message
-        self._has_wheel_abs_flags = any(n in self._signal_message for n in ABS_FLAG_NAMES[1:])
         self._abs_activity = AbsActivity()
         # The signals each sample reads at the window's centre, fetched in one call
         # (`_values_at`): accelerations, pressures, then the optional drive torques and yaw rate.
@@ -248,6 +245,11 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
             (self._source[n].series, n, floor) if n in self._source else None
             for n, floor in [(name, pushout) for name in PRESSURE_NAMES] + [("accel_long", None)])
         self._brake_gains = [vehicle.brake_gain(i) for i in range(4)]
+        # What the ABS activity reads (`_mark_abs_activity`), fetched in one call: the pressures,
+        # the master cylinder's, the car's flag and the wheels' (None where not mapped).
+        self._abs_inputs = PRESSURE_NAMES + (MASTER_PRESSURE_NAME,) + ABS_FLAG_NAMES
+        self._abs_lookups = tuple((self._source[n].series, n) if n in self._source else None
+                                  for n in self._abs_inputs)
         # `_compute_sample`'s compiled part reads its settings as one tuple of numbers, in the
         # order of `_frontcore.c`'s K_ constants.
         self._physics_constants = tuple(float(x) for x in (
@@ -450,12 +452,11 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         """`sample.abs_active`: the wheels an ABS is working (see `abs_activity`), from the
         pressures, the master-cylinder pressure and the car's ABS flags at the sample's instant."""
         t = sample.time_s
-        value = self._value
-        sample.abs_active = self._abs_activity.update(
-            t, tuple([value(n, t) for n in PRESSURE_NAMES]),
-            value(MASTER_PRESSURE_NAME, t) if self._has_master_pressure else None,
-            value("abs_active", t) if self._has_abs_flag else None,
-            tuple([value(n, t) for n in ABS_FLAG_NAMES[1:]]) if self._has_wheel_abs_flags else (None,) * 4)
+        if self.core is not None:
+            v = self.core.values_at(self._abs_lookups, t)
+        else:
+            v = tuple([self._value(n, t) for n in self._abs_inputs])
+        sample.abs_active = self._abs_activity.update(t, v[:4], v[4], v[5], v[6:])
 
     # -- the physics ---------------------------------------------------------------------------
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:

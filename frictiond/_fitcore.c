@@ -1043,6 +1043,53 @@ static Py_ssize_t get_slip_mu_wheel(PyObject *o_slip, PyObject *o_mu, PyObject *
     return cap;
 }
 
+/* One value per wheel from a sequence into out; 0 with an exception ("<who>: one peak per wheel"). */
+static int per_wheel(PyObject *o, double *out, const char *name, const char *who)
+{
+    if (floats(o, out, name) == NW)
+        return 1;
+    if (!PyErr_Occurred())
+        PyErr_Format(PyExc_ValueError, "%s: one peak per wheel", who);
+    return 0;
+}
+
+/* Sums and counts of values per band of a ratio between consecutive edges (band 0 below the
+   first edge, the last past the last), in the order numpy's bincount adds them. */
+typedef struct {
+    double sums[MAX_POINTS + 1];
+    Py_ssize_t counts[MAX_POINTS + 1];
+} BandSums;
+
+/* Adds value to the band of `at` (numpy.searchsorted(edges, at, side="right"): a NaN sorts past
+   every edge). */
+static void band_add(BandSums *acc, const double *edges, Py_ssize_t n_edges, double at, double value)
+{
+    Py_ssize_t band = 0;
+    if (isnan(at))
+        band = n_edges;
+    else
+        while (band < n_edges && edges[band] <= at)
+            band++;
+    acc->sums[band] += value;
+    acc->counts[band]++;
+}
+
+/* The highest band mean over the bands [first, last] with min_n values or more, as numpy's max
+   over them (a NaN mean wins); *found: whether any band had them. */
+static double highest_band_mean(const BandSums *acc, Py_ssize_t first, Py_ssize_t last, Py_ssize_t min_n, int *found)
+{
+    double best = 0.0;
+    *found = 0;
+    for (Py_ssize_t k = first; k <= last; k++)
+        if (acc->counts[k] >= min_n) {
+            const double mean = acc->sums[k] / (double)acc->counts[k];
+            if (!*found || isnan(mean) || mean > best)
+                best = *found && isnan(best) ? best : mean;
+            *found = 1;
+        }
+    return best;
+}
+
 /* EstimateConfidence._band_ratio_of over the window's samples [lo, hi): per band of slips (as
    multiples of each wheel's peak slip, between consecutive edges), the mean of μ over the wheel's
    peak μ; the highest of the bands with min_n samples or more, 0 without any. The same sums in
@@ -1056,11 +1103,8 @@ static PyObject *py_band_ratio(PyObject *self, PyObject *args)
                           &o_edges, &min_n))
         return NULL;
     double peak_mu[MAX_POINTS], peak_slip[MAX_POINTS], edges[MAX_POINTS];
-    if (floats(o_peak_mu, peak_mu, "peak_mu") != NW || floats(o_peak_slip, peak_slip, "peak_slip") != NW) {
-        if (!PyErr_Occurred())
-            PyErr_SetString(PyExc_ValueError, "band_ratio: one peak per wheel");
+    if (!per_wheel(o_peak_mu, peak_mu, "peak_mu", "band_ratio") || !per_wheel(o_peak_slip, peak_slip, "peak_slip", "band_ratio"))
         return NULL;
-    }
     const Py_ssize_t n_edges = floats(o_edges, edges, "edges");
     if (n_edges < 0)
         return NULL;
@@ -1080,31 +1124,15 @@ static PyObject *py_band_ratio(PyObject *self, PyObject *args)
         peak_mu[w] = py_max(peak_mu[w], 1e-3);
         peak_slip[w] = py_max(peak_slip[w], 1e-3);
     }
-    double sums[MAX_POINTS + 1] = {0.0};
-    Py_ssize_t counts[MAX_POINTS + 1] = {0};
+    BandSums acc;
+    memset(&acc, 0, sizeof acc);
     for (Py_ssize_t j = lo; j < hi; j++) {
         const Py_ssize_t w = wheel[j];
-        if (w < 0 || w >= NW)
-            continue;
-        const double at = slip[j] / peak_slip[w];
-        Py_ssize_t band = 0;
-        if (isnan(at))
-            band = n_edges;   /* (numpy's searchsorted puts NaN past every edge) */
-        else
-            while (band < n_edges && edges[band] <= at)
-                band++;
-        sums[band] += mu[j] / peak_mu[w];
-        counts[band]++;
+        if (w >= 0 && w < NW)
+            band_add(&acc, edges, n_edges, slip[j] / peak_slip[w], mu[j] / peak_mu[w]);
     }
-    double best = 0.0;
-    int found = 0;
-    for (Py_ssize_t k = 1; k < n_edges; k++)
-        if (counts[k] >= min_n) {
-            const double mean = sums[k] / (double)counts[k];
-            if (!found || mean > best)
-                best = mean;
-            found = 1;
-        }
+    int found;
+    const double best = highest_band_mean(&acc, 1, n_edges - 1, min_n, &found);
     result = PyFloat_FromDouble(found ? best : 0.0);
 out:
     release_all(b, 3);
@@ -1127,16 +1155,14 @@ static PyObject *py_excess_over_fit(PyObject *self, PyObject *args)
                           &o_published, &o_lift, &o_peak_slip, &o_edges, &min_n))
         return NULL;
     double published[MAX_POINTS], lift[MAX_POINTS], peak_slip[MAX_POINTS], edges[MAX_POINTS];
-    if (floats(o_published, published, "wheel_mu") != NW || floats(o_lift, lift, "fitted_mu") != NW
-        || floats(o_peak_slip, peak_slip, "peak_slip") != NW) {
-        if (!PyErr_Occurred())
-            PyErr_SetString(PyExc_ValueError, "excess_over_fit: one peak per wheel");
+    const char *who = "excess_over_fit";
+    if (!per_wheel(o_published, published, "wheel_mu", who) || !per_wheel(o_lift, lift, "fitted_mu", who)
+        || !per_wheel(o_peak_slip, peak_slip, "peak_slip", who))
         return NULL;
-    }
     const Py_ssize_t n_edges = floats(o_edges, edges, "edges");
+    Buf b[3];
     if (n_edges < 0)
         return NULL;
-    Buf b[3];
     memset(b, 0, sizeof b);
     PyObject *result = NULL;
     if (get_array(o_scratch, &b[0], "scratch", -1, 0, 0) < 0 || get_array(o_slip, &b[1], "slip", -1, 0, 0) < 0
@@ -1159,33 +1185,17 @@ static PyObject *py_excess_over_fit(PyObject *self, PyObject *args)
         published[w] = py_max(published[w], 1e-3);
         lift[w] = published[w] - lift[w];
     }
-    double sums[MAX_POINTS + 1] = {0.0};
-    Py_ssize_t counts[MAX_POINTS + 1] = {0};
+    BandSums acc;
+    memset(&acc, 0, sizeof acc);
     for (Py_ssize_t j = lo; j < hi; j++) {
         const Py_ssize_t w = wheel[j];
         if (w < 0 || w >= NW)
             continue;
         const double model_minus_data = weights[j] > 0.0 ? model_minus_weighted[j] / weights[j] : 0.0;
-        const double excess = (-model_minus_data - lift[w]) / published[w];
-        const double at = slip[j] / peak_slip[w];
-        Py_ssize_t band = 0;
-        if (isnan(at))
-            band = n_edges;   /* (numpy's searchsorted puts NaN past every edge) */
-        else
-            while (band < n_edges && edges[band] <= at)
-                band++;
-        sums[band] += excess;
-        counts[band]++;
+        band_add(&acc, edges, n_edges, slip[j] / peak_slip[w], (-model_minus_data - lift[w]) / published[w]);
     }
-    double best = 0.0;
-    int found = 0;
-    for (Py_ssize_t k = 1; k <= n_edges; k++)
-        if (counts[k] >= min_n) {
-            const double mean = sums[k] / (double)counts[k];
-            if (!found || mean > best || isnan(mean))
-                best = isnan(best) ? best : mean;   /* (numpy's max: a NaN wins) */
-            found = 1;
-        }
+    int found;
+    const double best = highest_band_mean(&acc, 1, n_edges, min_n, &found);
     result = PyFloat_FromDouble(found && best > 0.0 ? best : 0.0);
 out:
     release_all(b, 3);

@@ -1,8 +1,9 @@
 """Build of the compiled modules; everything else is in pyproject.toml.
 
 All are optional: `frictiond._fitcore` (the estimator's per-update numerics), `_frontcore` (the
-front end's derivative filter and interpolation, and the relaxation compensator's step), `_codeccore` (input decoding, output packing
-and E2E protection) and `_logcore` (reading candump lines). Without a C compiler the install
+front end's derivative filter and interpolation, and the relaxation compensator's step),
+`_codeccore` (input decoding, output packing and E2E protection) and `_logcore` (reading
+candump lines). Without a C compiler the install
 still succeeds and the same computations run in numpy and plain Python, several times slower.
 """
 from setuptools import Extension, setup

@@ -191,11 +191,13 @@ def test_a_small_campaign_runs_end_to_end_and_reports(tmp_path):
     assert biggest in format_not_valid(rows)
     # Each stop counted once per grouping, the cars' sensors among them (with the master
     # cylinder's pressure only, no wheel torque is known once an ABS has released a wheel).
-    marked = [dict(r, master_only=i < 2) for i, r in enumerate(rows)]
+    marked = [dict(r, master_only=i < 2, relaxation_m=(0.0, 0.0, 0.0, 0.2, 0.3, 0.55)[i]) for i, r in enumerate(rows)]
     counts = {line.split()[0]: int(line.split()[1]) for line in format_families(marked).splitlines()
-              if line.startswith(("pressures=", "wheel_hz="))}
+              if line.startswith(("pressures=", "wheel_hz=", "relaxation="))}
     assert counts["pressures=master-only"] == 2 and counts["pressures=per-wheel"] == 4
     assert sum(v for k, v in counts.items() if k.startswith("wheel_hz=")) == 6
+    # (the tyre's relaxation: a long one smooths the force over an ABS cycle)
+    assert (counts["relaxation=none"], counts["relaxation=<0.3m"], counts["relaxation=>=0.3m"]) == (3, 1, 2)
     names = [t[0] for t in target_rows(rows, "lugre")]
     assert len(names) == 14 and names[-1].endswith("0.9")
     path = tmp_path / "rows.json"

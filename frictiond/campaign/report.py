@@ -158,14 +158,22 @@ def _surface_class(r: Row) -> str:
     return "|".join(s.replace("mf-", "").replace("_asphalt", "") for s in str(r["surfaces"]).split("|"))
 
 
-# The per-family table's groupings: the draw's families, and the car's sensors where they decide
-# what can be measured at all (with the master cylinder's pressure only, no wheel's brake torque is
-# known once an ABS has released a wheel).
+def _relaxation_class(r: Row) -> str:
+    """The tyre's relaxation length in three classes: none, short, and long enough (0.3 m or more)
+    that at town speeds its lag smooths the force over an ABS cycle."""
+    length = float(r.get("relaxation_m") or 0.0)
+    return "none" if length <= 0.0 else ("<0.3m" if length < 0.3 else ">=0.3m")
+
+
+# The per-family table's groupings: the draw's families, the tyre's relaxation, and the car's
+# sensors where they decide what can be measured at all (with the master cylinder's pressure only,
+# no wheel's brake torque is known once an ABS has released a wheel).
 _FAMILY_GROUPS: dict[str, Callable[[Row], str]] = {
     "abs": lambda r: str(r["abs"]),
     "tyre": lambda r: str(r["tyre"]),
     "manoeuvre": lambda r: str(r["manoeuvre"]),
     "surfaces": _surface_class,
+    "relaxation": _relaxation_class,
     "pressures": lambda r: "master-only" if r.get("master_only") else "per-wheel",
     "wheel_hz": lambda r: str(r.get("wheel_hz")),
 }

@@ -1227,6 +1227,144 @@ static int intern_attributes(void)
 }
 
 
+/* ---- the wheel-speed window's checks (wheel_speed_filter.WheelSpeedFilter) ----------------- */
+
+/* newest_suspect(times, speeds, jerk) -> bool: WheelSpeedFilter._newest_suspect. `speeds`: one
+ * 4-sequence per time. */
+static PyObject *py_newest_suspect(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (!arg_count("newest_suspect", nargs, 3))
+        return NULL;
+    double jerk;
+    if (!arg_double(args[2], &jerk))
+        return NULL;
+    const Py_ssize_t n = PySequence_Size(args[0]);
+    if (n < 0)
+        return NULL;
+    if (n < 4)
+        Py_RETURN_FALSE;
+    double t[4], y[4][4];
+    for (int k = 0; k < 4; k++) {
+        PyObject *item = PySequence_GetItem(args[0], n - 4 + k);
+        const int ok = item && arg_double(item, &t[k]);
+        Py_XDECREF(item);
+        if (!ok)
+            return NULL;
+    }
+    if (!(t[0] < t[1] && t[1] < t[2] && t[2] < t[3]))
+        Py_RETURN_FALSE;
+    for (int k = 0; k < 4; k++) {
+        PyObject *row = PySequence_GetItem(args[1], n - 4 + k);
+        const int ok = row && arg_doubles(row, y[k], 4, "speeds");
+        Py_XDECREF(row);
+        if (!ok)
+            return NULL;
+    }
+    const double limit = jerk * ((t[3] - t[2]) * (t[3] - t[2]));
+    for (int i = 0; i < 4; i++) {
+        const double y0 = y[0][i], y1 = y[1][i], y2 = y[2][i], y3 = y[3][i];
+        if (fabs(y3 - (y2 + (y2 - y1) * (t[3] - t[2]) / (t[2] - t[1]))) > limit)
+            Py_RETURN_TRUE;
+        const double trend = y1 + (y1 - y0) * (t[2] - t[1]) / (t[1] - t[0]);
+        const double between = y1 + (y3 - y1) * (t[2] - t[1]) / (t[3] - t[1]);
+        if (fabs(y2 - trend) > limit && fabs(y2 - between) > limit)
+            Py_RETURN_TRUE;
+    }
+    Py_RETURN_FALSE;
+}
+
+/* slip_spread(weights, times, speeds, v, slips, accel) -> ((4 pairs), (a_lo, a_hi)) | None:
+ * WheelSpeedFilter._attach_slip_spread's numbers (accel: the body's, offset taken off). */
+static PyObject *py_slip_spread(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (!arg_count("slip_spread", nargs, 6))
+        return NULL;
+    double v, accel, slip[4];
+    if (!arg_double(args[3], &v) || !arg_doubles(args[4], slip, 4, "slips") || !arg_double(args[5], &accel))
+        return NULL;
+    Py_ssize_t n, n_weights;
+    double *times = floats_of(args[1], &n, "times");
+    if (!times)
+        return NULL;
+    double *weights = floats_of(args[0], &n_weights, "weights");
+    if (!weights) {
+        PyMem_Free(times);
+        return NULL;
+    }
+    PyObject *result = NULL;
+    if (n_weights < n) {
+        PyErr_SetString(PyExc_ValueError, "slip_spread: a weight per time");
+        goto out;
+    }
+    const Py_ssize_t centre = n / 2;
+    const double t_c = n ? times[centre] : 0.0;
+    Py_ssize_t lo = -1, hi = -1;
+    double mean = 0.0, second = 0.0;
+    for (Py_ssize_t k = 0; k < n; k++) {
+        const double w = weights[k];
+        if (w > 0.0) {
+            if (lo < 0)
+                lo = k;
+            hi = k;
+            const double d = times[k] - t_c;
+            mean += w * d;
+            second += w * d * d;
+        }
+    }
+    if (!(0 <= lo && lo < centre && centre < hi)) {
+        result = Py_NewRef(Py_None);
+        goto out;
+    }
+    const double d_lo = times[lo] - t_c, d_hi = times[hi] - t_c;
+    const double det = d_lo * d_hi * (d_hi - d_lo);
+    if (!(det < 0.0)) {
+        result = Py_NewRef(Py_None);
+        goto out;
+    }
+    double a[2];
+    a[0] = py_min(py_max((mean * d_hi * d_hi - second * d_hi) / det, 0.0), 0.5);
+    a[1] = py_min(py_max((d_lo * second - d_lo * d_lo * mean) / det, 0.0), 0.5);
+    const double ground_lo = 1.0 + accel * d_lo / v, ground_hi = 1.0 + accel * d_hi / v;
+    double at[3][4];
+    const Py_ssize_t rows[3] = {lo, centre, hi};
+    for (int r = 0; r < 3; r++) {
+        PyObject *row = PySequence_GetItem(args[2], rows[r]);
+        const int ok = row && arg_doubles(row, at[r], 4, "speeds");
+        Py_XDECREF(row);
+        if (!ok)
+            goto out;
+    }
+    double ends[8];
+    for (int i = 0; i < 4; i++) {
+        const double w_c = at[1][i];
+        if (!(w_c > 0.5 && 0.0 <= slip[i] && slip[i] < 1.0)) {
+            ends[2 * i] = ends[2 * i + 1] = slip[i];
+            continue;
+        }
+        const double rolling = (1.0 - slip[i]) / w_c;
+        ends[2 * i] = py_max(0.0, 1.0 - rolling * at[0][i] / ground_lo);
+        ends[2 * i + 1] = py_max(0.0, 1.0 - rolling * at[2][i] / ground_hi);
+    }
+    PyObject *pairs = PyTuple_New(4);
+    if (!pairs)
+        goto out;
+    for (int i = 0; i < 4; i++) {
+        PyObject *pair = tuple_of(ends + 2 * i, 2);
+        if (!pair) {
+            Py_DECREF(pairs);
+            goto out;
+        }
+        PyTuple_SET_ITEM(pairs, i, pair);
+    }
+    result = Py_BuildValue("(NN)", pairs, tuple_of(a, 2));
+out:
+    PyMem_Free(times);
+    PyMem_Free(weights);
+    return result;
+}
+
 /* ---- the tyre's relaxation (relaxation.RelaxationCompensator) ---------------------------- */
 
 #define RELAX_COLUMNS 9
@@ -1428,6 +1566,11 @@ static PyMethodDef methods[] = {
      "sample_physics(fe, constants, types, t_c, omega, omega_dot, glitch, inputs, stale, matched_lookups,\n"
      "wheel_times, torque_weights, ref, ref_fresh, torque_omega_dot) -> FrontEndResult: FrontEnd._compute_sample after the\n"
      "fit and the inputs, reading and updating the FrontEnd's state attributes."},
+    {"newest_suspect", (PyCFunction)(void (*)(void))py_newest_suspect, METH_FASTCALL,
+     "newest_suspect(times, speeds, jerk) -> bool: WheelSpeedFilter._newest_suspect."},
+    {"slip_spread", (PyCFunction)(void (*)(void))py_slip_spread, METH_FASTCALL,
+     "slip_spread(weights, times, speeds, v, slips, accel) -> ((4 (lo, hi) pairs), (a_lo, a_hi)) | None:\n"
+     "WheelSpeedFilter._attach_slip_spread's numbers (accel with the offset taken off)."},
     {"relaxation_step", (PyCFunction)(void (*)(void))py_relaxation_step, METH_FASTCALL,
      "relaxation_step(sums, edges, memory_s, time_s, last_learnt_s, learn, lag, dt, speed, slips, mu_before,\n"
      "mu, mu_after, usable_before, usable, usable_after, normal_forces, tyre_forces) -> (last_learnt_s, mus, forces):\n"

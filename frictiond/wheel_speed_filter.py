@@ -102,6 +102,8 @@ class WheelSpeedFilter:
         before it by more than `SUSPECT_JERK_RADPS3`·dt² (and, for the one before, its neighbours'
         interpolation too): a glitch that `_glitch_value` can only confirm two samples later."""
         times, speeds = self._wheel_times, self._wheel_speeds
+        if self.core is not None:
+            return self.core.newest_suspect(times, speeds, SUSPECT_JERK_RADPS3)
         n = len(times)
         if n < 4:
             return False
@@ -130,6 +132,13 @@ class WheelSpeedFilter:
         weights = self._torque_weights
         v = sample.speed_mps
         if weights is None or not v > 1.0:
+            return
+        if self.core is not None:
+            accel = self._sample_accel
+            accel = accel - self._accel_bias_mps2 if accel is not None and math.isfinite(accel) else 0.0
+            spread = self.core.slip_spread(weights, self._wheel_times, self._wheel_speeds, v, sample.slip, accel)
+            if spread is not None:
+                sample.slip_spread, sample.slip_spread_weights = spread
             return
         times = list(self._wheel_times)
         n = len(times)

@@ -44,10 +44,66 @@ def test_the_front_end_says_the_same_on_both_paths(scenario, seed, spike_thresho
             samples += 1
             for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n"):
                 np.testing.assert_allclose(getattr(a.sample, field), getattr(b.sample, field), rtol=1e-9, atol=1e-12)
-            assert a.sample.usable == b.sample.usable
+            assert a.sample.usable == b.sample.usable and a.sample.abs_active == b.sample.abs_active
+            assert (a.sample.slip_spread is None) == (b.sample.slip_spread is None)
+            if a.sample.slip_spread is not None:
+                np.testing.assert_allclose(a.sample.slip_spread, b.sample.slip_spread, rtol=1e-9, atol=1e-12)
+                np.testing.assert_allclose(a.sample.slip_spread_weights, b.sample.slip_spread_weights, rtol=1e-9, atol=1e-12)
     assert samples > 300
     assert compiled.last_estimate.status == floats.last_estimate.status
     assert compiled.last_estimate.mu_max == pytest.approx(floats.last_estimate.mu_max, abs=1e-6)
+
+
+@needs_core
+def test_the_window_checks_compiled_equal_the_python_ones():
+    """`_frontcore.newest_suspect` and `slip_spread` against `_newest_suspect` and
+    `_attach_slip_spread` on the same windows: random speeds with single-sample jumps (suspect
+    and not), uneven and repeated times, slips outside [0, 1), slow wheels, no accelerometer."""
+    from frictiond.samples import PhysicalSample
+    rng = np.random.default_rng(21)
+    fe = Pipeline(load_config(default_config_path())).front_end
+    n = fe._wheel_times.maxlen
+    suspect = spread = 0
+    for trial in range(2000):
+        times = list(np.cumsum(rng.uniform(0.005, 0.015, n)))
+        if trial % 50 == 0:
+            times[-2] = times[-3]                      # (a repeated time: neither path judges it)
+        speeds = [tuple(30.0 + 5.0 * t + rng.normal(0.0, 0.02, 4)) for t in times]
+        if trial % 3 == 0:                             # a jump in one wheel's newest or next samples
+            k, i = n - 1 - int(rng.integers(0, 2)), int(rng.integers(0, 4))
+            row = list(speeds[k])
+            row[i] += float(rng.choice((-1.0, 1.0)) * rng.uniform(0.5, 20.0))
+            speeds[k] = tuple(row)
+        if trial % 7 == 0:
+            speeds = [(0.3,) + row[1:] for row in speeds]   # (a wheel too slow for a spread)
+        fe._wheel_times.clear()
+        fe._wheel_speeds.clear()
+        fe._wheel_times.extend(times)
+        fe._wheel_speeds.extend(speeds)
+        weights = rng.uniform(0.0, 1.0, n) * (rng.random(n) > 0.2)
+        fe._torque_weights = list(weights / max(weights.sum(), 1e-9))
+        fe._sample_accel = None if trial % 11 == 0 else float(rng.normal(-5.0, 2.0))
+        slips = tuple(float(x) for x in rng.uniform(-0.1, 1.1, 4))
+        made = []
+        for core in (fe.core, None):
+            fe.core = core
+            made.append(fe._newest_suspect())
+            sample = PhysicalSample(times[n // 2], float(rng.uniform(0.5, 40.0)) if core else sample.speed_mps,
+                                    slips, (0.5,) * 4, (4000.0,) * 4, (2000.0,) * 4, (True,) * 4, True)
+            fe._attach_slip_spread(sample)
+            made.append((sample.slip_spread, sample.slip_spread_weights))
+        fe.core = frontend_module.compiled_front
+        assert made[0] == made[2], trial
+        assert np.array_equal(np.array(made[1][0], dtype=float), np.array(made[3][0], dtype=float)) if made[1][0] \
+            else made[1][0] == made[3][0], trial
+        assert made[1][1] == made[3][1], trial
+        suspect += made[0]
+        spread += made[1][0] is not None
+    assert 300 < suspect < 1900 and spread > 500   # (both verdicts and both outcomes were compared)
+    with pytest.raises(ValueError, match="a weight per time"):
+        fe.core.slip_spread([0.5], fe._wheel_times, fe._wheel_speeds, 10.0, slips, 0.0)
+    with pytest.raises(TypeError, match="speeds"):
+        fe.core.newest_suspect([0.0, 0.01, 0.02, 0.03], [(1.0, 2.0)] * 4, 80_000.0)
 
 
 @needs_core

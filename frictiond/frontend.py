@@ -236,8 +236,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         self._sample_inputs = (("accel_long", "accel_lat") + PRESSURE_NAMES
                                + (DRIVE_TORQUE_NAMES if self._has_drive_torque else ())
                                + (("yaw_rate",) if self._has_yaw_rate else ()))
-        self._sample_lookups = tuple((self._source[n].series, n) if n in self._source else None
-                                     for n in self._sample_inputs)
+        self._sample_lookups = self._lookups(self._sample_inputs)
         # The same for the filter-matched sums (`_matched_inputs`): pressures less the push-out
         # pressure, then the body's acceleration.
         pushout = vehicle.brake_pushout_pressure
@@ -248,8 +247,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         # What the ABS activity reads (`_mark_abs_activity`), fetched in one call: the pressures,
         # the master cylinder's, the car's flag and the wheels' (None where not mapped).
         self._abs_inputs = PRESSURE_NAMES + (MASTER_PRESSURE_NAME,) + ABS_FLAG_NAMES
-        self._abs_lookups = tuple((self._source[n].series, n) if n in self._source else None
-                                  for n in self._abs_inputs)
+        self._abs_lookups = self._lookups(self._abs_inputs)
         # `_compute_sample`'s compiled part reads its settings as one tuple of numbers, in the
         # order of `_frontcore.c`'s K_ constants.
         self._physics_constants = tuple(float(x) for x in (

@@ -156,6 +156,10 @@ class InputAlignment:
             return None
         return history.value_at(time_s, name)
 
+    def _lookups(self, names: tuple[str, ...]) -> tuple[tuple[dict, str] | None, ...]:
+        """Per name, (its message's series, name) for `_frontcore.values_at`; None where unmapped."""
+        return tuple((self._source[n].series, n) if n in self._source else None for n in names)
+
     def _values_at(self, time_s: float) -> tuple[float | None, ...]:
         """`_value` of each of `_sample_inputs` at one time."""
         if self.core is not None:

@@ -133,9 +133,9 @@ class WheelSpeedFilter:
         v = sample.speed_mps
         if weights is None or not v > 1.0:
             return
+        accel = self._sample_accel
+        accel = accel - self._accel_bias_mps2 if accel is not None and math.isfinite(accel) else 0.0
         if self.core is not None:
-            accel = self._sample_accel
-            accel = accel - self._accel_bias_mps2 if accel is not None and math.isfinite(accel) else 0.0
             spread = self.core.slip_spread(weights, self._wheel_times, self._wheel_speeds, v, sample.slip, accel)
             if spread is not None:
                 sample.slip_spread, sample.slip_spread_weights = spread
@@ -164,8 +164,6 @@ class WheelSpeedFilter:
         # Two weights at the ends that reproduce the filter's first two moments in time.
         a_lo = min(max((mean * d_hi * d_hi - second * d_hi) / det, 0.0), 0.5)
         a_hi = min(max((d_lo * second - d_lo * d_lo * mean) / det, 0.0), 0.5)
-        accel = self._sample_accel
-        accel = accel - self._accel_bias_mps2 if accel is not None and math.isfinite(accel) else 0.0
         ground_lo, ground_hi = 1.0 + accel * d_lo / v, 1.0 + accel * d_hi / v
         rows = self._wheel_speeds
         at_lo, at_c, at_hi = rows[lo], rows[centre], rows[hi]

@@ -479,7 +479,7 @@ enum {
     K_MAX_ALL_WHEEL_SLIP, K_SAMPLE_PERIOD, K_BIAS_TAU, K_MASS, K_CG_HEIGHT, K_CG_FRONT, K_CG_REAR, K_TRACK_FRONT,
     K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
     K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_MASTER_ONLY, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
-    K_LAG_COMPENSATION, K_BIAS_SETTLE, K_COUNT
+    K_LAG_COMPENSATION, K_BIAS_SETTLE, K_CORRECTION_RATE, K_CORRECTION_HOLD, K_COUNT
 };
 
 #define MAX_ABS_ACCEL 30.0
@@ -511,15 +511,15 @@ enum {
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released,
-    *A_unjudged, *A_lag_state, *A_slipping_time;
+    *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_seeded;
 
 typedef struct {
     long repeats[NW];
     int dead[NW];
     int has_low_since[NW];
     double low_since[NW], low_unbraked[NW];
-    int has_last_sample, has_speed_time, has_speed_est;
-    double last_sample, bias, unexplained, speed_time, speed_est, slipping_time;
+    int has_last_sample, has_speed_time, has_speed_est, has_faster_since, has_seeded;
+    double last_sample, bias, unexplained, speed_time, speed_est, slipping_time, faster_since, seeded;
     long bias_samples, ref_disagreements;
     double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
     double unjudged;
@@ -606,6 +606,8 @@ static int load_state(PyObject *fe, FEState *s)
         || get_float_attr(fe, A_unexplained, &s->unexplained, NULL) < 0
         || get_float_attr(fe, A_speed_time, &s->speed_time, &s->has_speed_time) < 0
         || get_float_attr(fe, A_speed_est, &s->speed_est, &s->has_speed_est) < 0
+        || get_float_attr(fe, A_faster_since, &s->faster_since, &s->has_faster_since) < 0
+        || get_float_attr(fe, A_seeded, &s->seeded, &s->has_seeded) < 0
         || get_long_attr(fe, A_ref_disagreements, &s->ref_disagreements) < 0
         || get_float_attr(fe, A_gain_tt, &s->gain_tt, NULL) < 0 || get_float_attr(fe, A_gain_tn, &s->gain_tn, NULL) < 0
         || get_float_attr(fe, A_recent_weight, &s->recent_weight, NULL) < 0
@@ -681,6 +683,8 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_unexplained, PyFloat_FromDouble(s->unexplained)) < 0
         || set_attr_new(fe, A_speed_time, float_or_none(s->has_speed_time, s->speed_time)) < 0
         || set_attr_new(fe, A_speed_est, float_or_none(s->has_speed_est, s->speed_est)) < 0
+        || set_attr_new(fe, A_faster_since, float_or_none(s->has_faster_since, s->faster_since)) < 0
+        || set_attr_new(fe, A_seeded, float_or_none(s->has_seeded, s->seeded)) < 0
         || set_attr_new(fe, A_ref_disagreements, PyLong_FromLong(s->ref_disagreements)) < 0
         || set_attr_new(fe, A_gain_tt, PyFloat_FromDouble(s->gain_tt)) < 0
         || set_attr_new(fe, A_gain_tn, PyFloat_FromDouble(s->gain_tn)) < 0
@@ -785,6 +789,8 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
     for (int i = 1; i < NW; i++)
         fastest = py_max(fastest, wl[i]);
     *from_ref = 0;
+    const int was_faster = s->has_faster_since;   /* (two wheels faster than it, since) */
+    s->has_faster_since = 0;
     if (has_ref && ref_fresh && 0.0 <= ref && ref <= MAX_SPEED && ref_plausible(s, k, ref, fastest)) {
         s->has_speed_est = 1;
         s->speed_est = ref;
@@ -795,13 +801,20 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
     double v = s->speed_est;
     if (!s->has_speed_est || dt <= 0.0 || dt > k[K_MAX_GAP]) {
         v = fastest;
+        s->has_seeded = wheels_loaded;   /* (restarted under braking from a slipping wheel) */
+        s->seeded = time_s;
     } else {
         v = v + accel_long * dt;
         const double second = second_of(wl);
         if (!wheels_loaded) {
             v += k[K_GAIN_FREE] * (mean - v);
+            s->has_seeded = 0;
         } else if (second > v) {
-            v += py_min(k[K_GAIN_UP] * (second - v), MAX_ABS_ACCEL * 0.5 * dt + 0.02);
+            s->has_faster_since = 1;
+            s->faster_since = was_faster ? s->faster_since : time_s;
+            const int full = time_s - s->faster_since >= k[K_CORRECTION_HOLD] || s->has_seeded;
+            const double limit = full ? MAX_ABS_ACCEL * 0.5 * dt + 0.02 : k[K_CORRECTION_RATE] * dt;
+            v += py_min(k[K_GAIN_UP] * (second - v), limit);
         } else {
             const double ceiling = fastest / (1.0 - k[K_MIN_BRAKED_SLIP]);
             if (v > ceiling)
@@ -1218,7 +1231,8 @@ static int intern_attributes(void)
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
         {&A_model_holds, "_brake_model_holds"}, {&A_unjudged, "_unjudged_s"}, {&A_lag_state, "_lag_state"},
-        {&A_slipping_time, "_slipping_time_s"},
+        {&A_slipping_time, "_slipping_time_s"}, {&A_faster_since, "_wheels_faster_since_s"},
+        {&A_seeded, "_speed_seeded_s"},
     };
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (!(*names[i].slot = PyUnicode_InternFromString(names[i].name)))

@@ -85,6 +85,11 @@ class FrontEndOptions:
     reorder_window: float = 0.05          # s; an older wheel-speed frame within this is skipped, not a restart
     speed_gain_up: float = 0.3            # observer gain when wheels read faster than the estimate
     speed_gain_down: float = 0.02         # ... and when even the fastest wheel reads too slow
+    # Under braking two wheels faster than the estimate pull it up by no more than this (m/s²: the
+    # learnt accelerometer offset's error, with margin), unless they stay faster for longer than a
+    # released tyre's overshoot lasts (`speed_estimate.SpeedEstimate._speed_correction_limit`)
+    speed_correction_rate: float = 0.1
+    speed_correction_hold_s: float = 0.2
     # Under braking even the least-braked wheel slips less than this: only a bound against an
     # accelerometer gone wrong, not a speed reference (an ABS may hold every wheel at 30-40 %
     # slip on a road whose peak is there; a tighter bound drags the speed and every slip low).
@@ -125,8 +130,9 @@ class FrontEndOptions:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.max_slip < 1:
             raise ValueError(f"max_slip: must be in (0, 1), got {self.max_slip!r}")
-        if not self.accel_bias_settle_s >= 0:
-            raise ValueError(f"accel_bias_settle_s: must be ≥ 0, got {self.accel_bias_settle_s!r}")
+        for name in ("accel_bias_settle_s", "speed_correction_rate", "speed_correction_hold_s"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name}: must be ≥ 0, got {getattr(self, name)!r}")
 
 
 @dataclass(slots=True)
@@ -261,7 +267,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
             vehicle.rolling_resistance, vehicle.drag_area_coefficient, options.brake_gain_limits,
             options.brake_gain_time_constant, options.max_slip, self._has_drive_torque, self._has_yaw_rate,
             float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation,
-            options.accel_bias_settle_s))
+            options.accel_bias_settle_s, options.speed_correction_rate, options.speed_correction_hold_s))
 
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
@@ -274,6 +280,8 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
         self._speed_estimate_mps: float | None = None
         self._speed_time_s: float | None = None
+        self._wheels_faster_since_s: float | None = None   # (under braking, two wheels faster than the estimate)
+        self._speed_seeded_s: float | None = None          # (the estimate last restarted from the fastest wheel)
         self._reset_body_equation()
         self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
         self._reset_pressure_zeros()
@@ -401,7 +409,8 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         if stale:
             return FrontEndResult(None, stale, None)
         # (what this sample will teach, as it was: put back if its frame is revoked, `_take_back`)
-        self._before_sample = (time_s, self._speed_estimate_mps, self._speed_time_s, self._last_sample_time_s,
+        self._before_sample = (time_s, self._speed_estimate_mps, self._speed_time_s, self._wheels_faster_since_s,
+                               self._speed_seeded_s, self._last_sample_time_s,
                                [getattr(self, name) for name in LEARNT_STATE])
         if (self._newest_suspect() or self._input_lost(time_s)
                 or (self.gate.contested(time_s) and not self._wheel_senders_told_apart(time_s))):

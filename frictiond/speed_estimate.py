@@ -2,10 +2,11 @@
 
 A ground-speed sensor's reading while it is fresh and plausible; otherwise an observer driven by
 the accelerometer and corrected by the wheels: pulled towards their mean while they roll free,
-under braking only up by two wheels faster than it (never faster than a car gains speed) and
-down only when even the fastest wheel would slip more than an ABS lets it; over a suspect
-sample carried by the accelerometer alone. `SpeedEstimate` is a part of `frontend.FrontEnd`
-(its state, `_speed_estimate_mps` and `_speed_time_s`, is the front end's, where
+under braking only up by two wheels faster than it (slowly, unless they stay faster: a released
+tyre overshoots the car's speed) and down only when even the fastest wheel would slip more than
+an ABS lets it; over a suspect sample carried by the accelerometer alone. `SpeedEstimate` is a
+part of `frontend.FrontEnd` (its state, `_speed_estimate_mps`, `_speed_time_s`,
+`_wheels_faster_since_s` and `_speed_seeded_s`, is the front end's, where
 `_frontcore.sample_physics` reads and writes it); the code here is the fallback without a C
 compiler and the reference (tests compare).
 """
@@ -31,6 +32,7 @@ class SpeedEstimate:
         opts = self.options
         dt = 0.0 if self._speed_time_s is None else time_s - self._speed_time_s
         self._speed_time_s = time_s
+        faster_since, self._wheels_faster_since_s = self._wheels_faster_since_s, None
         ref = self._value("vehicle_speed_ref", time_s) if self._has_ref_speed else None
         fastest = max(wheel_linear)
         if ref is not None and self._ref_fresh(time_s) and 0.0 <= ref <= MAX_SPEED_MPS and self._ref_plausible(ref, fastest):
@@ -40,16 +42,18 @@ class SpeedEstimate:
         v = self._speed_estimate_mps
         if v is None or dt <= 0.0 or dt > opts.max_gap:
             v = fastest
+            # (restarted under braking from a slipping wheel: `_speed_correction_limit`)
+            self._speed_seeded_s = time_s if wheels_loaded else None
         else:
             v = v + accel_long * dt
             second = _second_fastest(wheel_linear)
             if not wheels_loaded:
                 v += opts.speed_gain_free_rolling * (mean - v)
+                self._speed_seeded_s = None
             elif second > v:
-                # Two wheels faster than the estimate pull it up, but no faster than a car can
-                # gain speed: one corrupt wheel speed must not carry it off (under ABS nothing
-                # pulls it down again: each glitch of one wheel ratcheted it up, every slip high).
-                v += min(opts.speed_gain_up * (second - v), MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02)
+                faster_since = time_s if faster_since is None else faster_since
+                self._wheels_faster_since_s = faster_since
+                v += min(opts.speed_gain_up * (second - v), self._speed_correction_limit(time_s - faster_since, dt))
             else:
                 # Braked wheels all read low during ABS: even the least-braked one slips by
                 # several percent, so pulling towards the fastest wheel biases the speed (and
@@ -62,6 +66,27 @@ class SpeedEstimate:
         v = min(max(v, 0.0), MAX_SPEED_MPS)
         self._speed_estimate_mps = v
         return v, False
+
+    def _speed_correction_limit(self, faster_for_s: float, dt: float) -> float:
+        """How far two wheels faster than the estimate may pull it up in one step while braking.
+
+        Under braking the estimate runs on the accelerometer, whose offset is learnt while the car
+        rolls free (its error ≈ 0.02 m/s², p90 0.04): it cannot fall behind the car faster than
+        `speed_correction_rate`. A braked wheel reads faster than the car when a tyre whose force
+        lags its slip carries it past the ground's speed after an ABS release (by up to 5–8 % for
+        a few relaxation lengths of rolling), or when its signal is corrupt; followed, every such
+        overshoot ratchets the estimate up, and nothing under ABS pulls it down again (every
+        slip then reads high). Two wheels faster for longer than an overshoot lasts
+        (`speed_correction_hold_s`) mean the estimate is low: then the full pull, no faster
+        than a car can gain speed (one corrupt wheel must not carry it off). So too after a
+        restart under braking (a gap in the wheel speeds, a clock step), until the car rolls free
+        again: restarted from the fastest wheel, the estimate is as wrong as that wheel's slip,
+        not as the accelerometer drifts, and only the releases can show the car's speed.
+        """
+        opts = self.options
+        if faster_for_s >= opts.speed_correction_hold_s or self._speed_seeded_s is not None:
+            return MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02
+        return opts.speed_correction_rate * dt
 
     def _ref_plausible(self, ref: float, fastest_wheel: float) -> bool:
         """A ground-speed reading the wheels and the recent estimate can agree with.

@@ -135,6 +135,70 @@ def test_speed_estimate_without_reference_during_abs_like_slip():
     assert abs(s.speed_mps - true_speed) / true_speed < 0.12
 
 
+def _brake_with_front_slips(fe: FrontEnd, front_slip, accel_reads_more_mps2: float = 0.0, v0: float = 20.0,
+                            decel: float = 6.0, seconds: float = 2.5, wheels_lost=(math.inf, math.inf)
+                            ) -> list[tuple[float, float]]:
+    """Rolls free for 0.5 s, then brakes at `decel` with the rear wheels at 8 % slip and the front
+    ones at `front_slip(t)`; no speed reference, no wheel speeds within `wheels_lost`.
+    (time, estimate − true speed) per braked sample."""
+    errors = []
+    for k in range(int((0.5 + seconds) / 0.01)):
+        t = k * 0.01
+        braking = t >= 0.5
+        speed = v0 - decel * max(t - 0.5, 0.0)
+        slips = (front_slip(t), front_slip(t), 0.08, 0.08) if braking else (0.0,) * 4
+        fe.push(t + 0.003, "ACCEL", {"accel_long": -(decel + accel_reads_more_mps2) if braking else 0.0,
+                                     "accel_lat": 0.0, "yaw_rate": 0.0})
+        fe.push(t + 0.006, "PRESS", dict(zip(PRESSURE_NAMES, (60.0 if braking else 0.0,) * 4)))
+        omegas = [speed * (1.0 - s) / VEH.wheel_radius for s in slips]
+        if wheels_lost[0] <= t < wheels_lost[1]:
+            continue
+        r = fe.push(t, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, omegas)))
+        if r is not None and r.sample is not None and r.sample.braking:
+            errors.append((r.sample.time_s, r.sample.speed_mps - (v0 - decel * (r.sample.time_s - 0.5))))
+    return errors
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_released_wheels_overshooting_the_car_do_not_ratchet_the_speed_up(compiled):
+    # After each ABS release the front tyres, their force lagging their slip, carry the wheels
+    # 5 % past the car's speed for 40 ms (every 0.25 s). Followed, each overshoot lifted the
+    # estimate and nothing pulled it down again: slips read high for the rest of the stop.
+    fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})
+    if not compiled:
+        fe.core = None
+    errors = _brake_with_front_slips(fe, lambda t: -0.05 if (t - 0.5) % 0.25 < 0.04 else 0.08)
+    assert errors and max(e for _, e in errors) < 0.05       # m/s at 20 → 5 m/s
+    assert abs(errors[-1][1]) < 0.05
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_wheels_that_stay_faster_than_the_speed_estimate_correct_it(compiled):
+    # The accelerometer reads 0.5 m/s² more deceleration than the car's (an offset not learnt):
+    # the estimate falls behind, and the front wheels, unbraked at the car's speed, stay faster
+    # than it for longer than any overshoot lasts: the estimate follows them.
+    fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})
+    if not compiled:
+        fe.core = None
+    errors = _brake_with_front_slips(fe, lambda t: 0.0, accel_reads_more_mps2=0.5)
+    late = [e for t, e in errors if t >= 1.5]
+    assert late and max(abs(e) for e in late) < 0.1
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_speed_estimate_restarted_from_a_slipping_wheel_is_corrected_by_the_releases(compiled):
+    # Wheel speeds lost for 0.3 s while every wheel slips 8 %: the estimate restarts from the
+    # fastest wheel, 8 % low. That error is the wheel's slip, not an accelerometer's drift: the
+    # front wheels, released to the car's speed for 60 ms every 0.25 s, correct it at once.
+    fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})
+    if not compiled:
+        fe.core = None
+    errors = _brake_with_front_slips(fe, lambda t: 0.0 if (t - 0.5) % 0.25 < 0.06 else 0.08, wheels_lost=(1.2, 1.6))
+    after = [e for t, e in errors if t >= 1.6]
+    assert after[0] < -0.5                                  # (restarted low: the test sees the restart)
+    assert max(abs(e) for t, e in errors if t >= 2.5) < 0.05
+
+
 def test_stale_input_is_reported_within_three_periods():
     fe = make()
     drive = Drive()

@@ -511,15 +511,15 @@ enum {
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released,
-    *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_seeded;
+    *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_restarted_braking;
 
 typedef struct {
     long repeats[NW];
     int dead[NW];
     int has_low_since[NW];
     double low_since[NW], low_unbraked[NW];
-    int has_last_sample, has_speed_time, has_speed_est, has_faster_since, has_seeded;
-    double last_sample, bias, unexplained, speed_time, speed_est, slipping_time, faster_since, seeded;
+    int has_last_sample, has_speed_time, has_speed_est, has_faster_since, restarted_braking;
+    double last_sample, bias, unexplained, speed_time, speed_est, slipping_time, faster_since;
     long bias_samples, ref_disagreements;
     double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
     double unjudged;
@@ -607,7 +607,7 @@ static int load_state(PyObject *fe, FEState *s)
         || get_float_attr(fe, A_speed_time, &s->speed_time, &s->has_speed_time) < 0
         || get_float_attr(fe, A_speed_est, &s->speed_est, &s->has_speed_est) < 0
         || get_float_attr(fe, A_faster_since, &s->faster_since, &s->has_faster_since) < 0
-        || get_float_attr(fe, A_seeded, &s->seeded, &s->has_seeded) < 0
+        || get_bool_attr(fe, A_restarted_braking, &s->restarted_braking) < 0
         || get_long_attr(fe, A_ref_disagreements, &s->ref_disagreements) < 0
         || get_float_attr(fe, A_gain_tt, &s->gain_tt, NULL) < 0 || get_float_attr(fe, A_gain_tn, &s->gain_tn, NULL) < 0
         || get_float_attr(fe, A_recent_weight, &s->recent_weight, NULL) < 0
@@ -684,7 +684,7 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_speed_time, float_or_none(s->has_speed_time, s->speed_time)) < 0
         || set_attr_new(fe, A_speed_est, float_or_none(s->has_speed_est, s->speed_est)) < 0
         || set_attr_new(fe, A_faster_since, float_or_none(s->has_faster_since, s->faster_since)) < 0
-        || set_attr_new(fe, A_seeded, float_or_none(s->has_seeded, s->seeded)) < 0
+        || set_attr_new(fe, A_restarted_braking, PyBool_FromLong(s->restarted_braking)) < 0
         || set_attr_new(fe, A_ref_disagreements, PyLong_FromLong(s->ref_disagreements)) < 0
         || set_attr_new(fe, A_gain_tt, PyFloat_FromDouble(s->gain_tt)) < 0
         || set_attr_new(fe, A_gain_tn, PyFloat_FromDouble(s->gain_tn)) < 0
@@ -801,18 +801,17 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
     double v = s->speed_est;
     if (!s->has_speed_est || dt <= 0.0 || dt > k[K_MAX_GAP]) {
         v = fastest;
-        s->has_seeded = wheels_loaded;   /* (restarted under braking from a slipping wheel) */
-        s->seeded = time_s;
+        s->restarted_braking = wheels_loaded;   /* (from a slipping wheel) */
     } else {
         v = v + accel_long * dt;
         const double second = second_of(wl);
         if (!wheels_loaded) {
             v += k[K_GAIN_FREE] * (mean - v);
-            s->has_seeded = 0;
+            s->restarted_braking = 0;
         } else if (second > v) {
             s->has_faster_since = 1;
             s->faster_since = was_faster ? s->faster_since : time_s;
-            const int full = time_s - s->faster_since >= k[K_CORRECTION_HOLD] || s->has_seeded;
+            const int full = time_s - s->faster_since >= k[K_CORRECTION_HOLD] || s->restarted_braking;
             const double limit = full ? MAX_ABS_ACCEL * 0.5 * dt + 0.02 : k[K_CORRECTION_RATE] * dt;
             v += py_min(k[K_GAIN_UP] * (second - v), limit);
         } else {
@@ -1232,7 +1231,7 @@ static int intern_attributes(void)
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
         {&A_model_holds, "_brake_model_holds"}, {&A_unjudged, "_unjudged_s"}, {&A_lag_state, "_lag_state"},
         {&A_slipping_time, "_slipping_time_s"}, {&A_faster_since, "_wheels_faster_since_s"},
-        {&A_seeded, "_speed_seeded_s"},
+        {&A_restarted_braking, "_speed_restarted_braking"},
     };
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (!(*names[i].slot = PyUnicode_InternFromString(names[i].name)))

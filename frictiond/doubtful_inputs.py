@@ -60,7 +60,7 @@ class DoubtfulInputs:
                 # (the next sample has the same window centre: the observer would restart at
                 # the fastest wheel, every slip zero for the rest of the stop).
                 (_, self._speed_estimate_mps, self._speed_time_s, self._wheels_faster_since_s,
-                 self._speed_seeded_s, self._last_sample_time_s, learnt) = before
+                 self._speed_restarted_braking, self._last_sample_time_s, learnt) = before
                 for name, value in zip(LEARNT_STATE, learnt):
                     setattr(self, name, value)
 

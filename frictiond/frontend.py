@@ -281,7 +281,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
         self._speed_estimate_mps: float | None = None
         self._speed_time_s: float | None = None
         self._wheels_faster_since_s: float | None = None   # (under braking, two wheels faster than the estimate)
-        self._speed_seeded_s: float | None = None          # (the estimate last restarted from the fastest wheel)
+        self._speed_restarted_braking = False              # (the estimate restarted from the fastest wheel, braking)
         self._reset_body_equation()
         self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
         self._reset_pressure_zeros()
@@ -410,7 +410,7 @@ class FrontEnd(WheelSpeedFilter, SpeedEstimate, BodyEquation, DoubtfulInputs, In
             return FrontEndResult(None, stale, None)
         # (what this sample will teach, as it was: put back if its frame is revoked, `_take_back`)
         self._before_sample = (time_s, self._speed_estimate_mps, self._speed_time_s, self._wheels_faster_since_s,
-                               self._speed_seeded_s, self._last_sample_time_s,
+                               self._speed_restarted_braking, self._last_sample_time_s,
                                [getattr(self, name) for name in LEARNT_STATE])
         if (self._newest_suspect() or self._input_lost(time_s)
                 or (self.gate.contested(time_s) and not self._wheel_senders_told_apart(time_s))):

@@ -6,7 +6,7 @@ under braking only up by two wheels faster than it (slowly, unless they stay fas
 tyre overshoots the car's speed) and down only when even the fastest wheel would slip more than
 an ABS lets it; over a suspect sample carried by the accelerometer alone. `SpeedEstimate` is a
 part of `frontend.FrontEnd` (its state, `_speed_estimate_mps`, `_speed_time_s`,
-`_wheels_faster_since_s` and `_speed_seeded_s`, is the front end's, where
+`_wheels_faster_since_s` and `_speed_restarted_braking`, is the front end's, where
 `_frontcore.sample_physics` reads and writes it); the code here is the fallback without a C
 compiler and the reference (tests compare).
 """
@@ -42,14 +42,14 @@ class SpeedEstimate:
         v = self._speed_estimate_mps
         if v is None or dt <= 0.0 or dt > opts.max_gap:
             v = fastest
-            # (restarted under braking from a slipping wheel: `_speed_correction_limit`)
-            self._speed_seeded_s = time_s if wheels_loaded else None
+            # (under braking: from a slipping wheel, `_speed_correction_limit`)
+            self._speed_restarted_braking = wheels_loaded
         else:
             v = v + accel_long * dt
             second = _second_fastest(wheel_linear)
             if not wheels_loaded:
                 v += opts.speed_gain_free_rolling * (mean - v)
-                self._speed_seeded_s = None
+                self._speed_restarted_braking = False
             elif second > v:
                 faster_since = time_s if faster_since is None else faster_since
                 self._wheels_faster_since_s = faster_since
@@ -84,7 +84,7 @@ class SpeedEstimate:
         not as the accelerometer drifts, and only the releases can show the car's speed.
         """
         opts = self.options
-        if faster_for_s >= opts.speed_correction_hold_s or self._speed_seeded_s is not None:
+        if faster_for_s >= opts.speed_correction_hold_s or self._speed_restarted_braking:
             return MAX_ABS_ACCEL_MPS2 * 0.5 * dt + 0.02
         return opts.speed_correction_rate * dt
 

@@ -1473,25 +1473,35 @@ static double weights_into(const double *t, Py_ssize_t m, double now, double tau
     return total;
 }
 
-/* The residuals r[first:m] back in μ units (r·σ/√w): their mean, rms deviation and |Σ sign| / n. */
-static void residual_stats(const double *r, const double *w, Py_ssize_t first, Py_ssize_t m, double sigma,
-                           double *mean, double *rms, double *same_sign)
+/* The residuals r[first:m] back in μ units (r·σ/√w): their mean, rms deviation and |Σ sign| / n.
+ * With `wheel`, only the front wheels' (index 0 or 1); returns how many were counted (0: all 0). */
+static Py_ssize_t residual_stats(const double *r, const double *w, const Py_ssize_t *wheel, Py_ssize_t first,
+                                 Py_ssize_t m, double sigma, double *mean, double *rms, double *same_sign)
 {
-    const Py_ssize_t n = m - first;
+    Py_ssize_t n = 0;
     double sum = 0.0, signs = 0.0;
     for (Py_ssize_t j = first; j < m; j++) {
+        if (wheel && wheel[j] >= 2)
+            continue;
         const double e = r[j] * sigma / sqrt(w[j]);
         sum += e;
         signs += (e > 0) - (e < 0);
+        n++;
     }
+    *mean = *rms = *same_sign = 0.0;
+    if (n == 0)
+        return 0;
     *mean = sum / n;
     double dev2 = 0.0;
     for (Py_ssize_t j = first; j < m; j++) {
+        if (wheel && wheel[j] >= 2)
+            continue;
         const double d = r[j] * sigma / sqrt(w[j]) - *mean;
         dev2 += d * d;
     }
     *rms = sqrt(dev2 / n);
     *same_sign = fabs(signs / n);
+    return n;
 }
 
 /* Forgetting weights exp(min(t − now, 0)/τ) and the rows' weights √w/σ, into w_out, sw_out;
@@ -1544,7 +1554,7 @@ static PyObject *py_residual_bias(PyObject *self, PyObject *args)
         goto out;
     }
     double mean, rms, same_sign;
-    residual_stats(b[0].view.buf, b[1].view.buf, first, m, sigma, &mean, &rms, &same_sign);
+    residual_stats(b[0].view.buf, b[1].view.buf, NULL, first, m, sigma, &mean, &rms, &same_sign);
     result = Py_BuildValue("(ddd)", mean, rms, same_sign);
 out:
     release_all(b, 2);
@@ -1683,13 +1693,15 @@ static PyObject *py_append_samples(PyObject *self, PyObject *const *args, Py_ssi
 
 /* fit_window(arrays, lo, hi, now, tau, sigma, jump_t, x, lb, ub, prior, inv_prior_std, tie, gradient,
  *            normal, constants, radius, max_iterations, ftol, xtol, gtol, predicted_ftol, max_rejections,
- *            rows_x, cached_n) -> (w_sum, radius, r·r, first, mean, rms, same_sign)
+ *            rows_x, cached_n) -> (w_sum, radius, r·r, first, mean, rms, same_sign, n_front, front_mean,
+ *                                   front_rms, front_same_sign)
  *
  * One update's fit on the window's own columns [lo, hi), without slicing them in Python:
  * `weights` (into scratch rows 2 and 3), `solve` (residuals into scratch rows 0 and 1, the row
  * cache in core_rows[lo:hi], valid for its first cached_n samples at rows_x), then the data
  * residuals' sum of squares and `residual_bias` of the samples from `search_left(jump_t)` on
- * (`first` relative to lo; mean, rms and same_sign 0 when there are none).
+ * (`first` relative to lo; mean, rms and same_sign 0 when there are none), then the same of the
+ * front wheels' among them and how many those are.
  * arrays: (pow_lam_v, stiff, lam_v, mu, wheel, time, scratch (4 x capacity), core_rows (capacity x 5)). */
 /* METH_FASTCALL, its 25 arguments converted here (PyArg_ParseTuple's format was a tenth of the call). */
 static PyObject *py_fit_window(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -1776,10 +1788,14 @@ static PyObject *py_fit_window(PyObject *self, PyObject *const *args, Py_ssize_t
                             (double *)b[7].view.buf + ROW * lo, b[16].view.buf, cached_n, rows_trial);
     const double rr = dot_of(r_data, r_data, m);
     const Py_ssize_t first = search_left(t, 0, m, jump_t);
-    double mean = 0.0, rms = 0.0, same_sign = 0.0;
-    if (first < m)
-        residual_stats(r_data, w, first, m, sigma, &mean, &rms, &same_sign);
-    result = Py_BuildValue("(dddnddd)", w_sum, o.radius, rr, first, mean, rms, same_sign);
+    double mean = 0.0, rms = 0.0, same_sign = 0.0, f_mean = 0.0, f_rms = 0.0, f_same_sign = 0.0;
+    Py_ssize_t n_front = 0;
+    if (first < m) {
+        residual_stats(r_data, w, NULL, first, m, sigma, &mean, &rms, &same_sign);
+        n_front = residual_stats(r_data, w, wheel, first, m, sigma, &f_mean, &f_rms, &f_same_sign);
+    }
+    result = Py_BuildValue("(dddndddnddd)", w_sum, o.radius, rr, first, mean, rms, same_sign, n_front, f_mean, f_rms,
+                           f_same_sign);
 out:
     PyMem_Free(rows_trial);
     release_all(b, 17);
@@ -2000,7 +2016,8 @@ static PyMethodDef methods[] = {
     {"fit_window", (PyCFunction)(void (*)(void))py_fit_window, METH_FASTCALL,
      "fit_window(arrays, lo, hi, now, tau, sigma, jump_t, x, lb, ub, prior, inv_prior_std, tie, gradient, normal,\n"
      "constants, radius, max_iterations, ftol, xtol, gtol, predicted_ftol, max_rejections, rows_x, cached_n)\n"
-     "-> (w_sum, radius, r.r, first, mean, rms, same_sign): weights, solve and residual_bias on the window's columns"},
+     "-> (w_sum, radius, r.r, first, mean, rms, same_sign, n_front, front_mean, front_rms, front_same_sign): weights,\n"
+     "solve and residual_bias (all samples, the front wheels' alone) on the window's columns"},
     {"drift_reference", py_drift_reference, METH_VARARGS,
      "drift_reference(history, since, span) -> float | None: the median mu_max of the (time, mu_max) pairs\n"
      "from the first at or after since to span after it; None when one of them is NaN"},

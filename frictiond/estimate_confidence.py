@@ -251,8 +251,9 @@ class EstimateConfidence:
                    + (o.misfit_peak_ratio * self._data_above_fit)**2
                    + (o.spread_loss_weight * self._peak_spread_loss)**2)
         ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
-        # Newest residuals biased beyond the noise: the road may be changing under the fit.
-        excess = max(0.0, self._innovation_score - o.jump_threshold)
+        # Newest residuals biased beyond the noise, of all wheels or of the front ones (which
+        # meet a new road first): the road may be changing under the fit.
+        excess = max(0.0, max(self._innovation_score, self._front_innovation_score) - o.jump_threshold)
         innovation = math.exp(-excess * excess / 8.0)
         # (σ is 0 only with `model_mismatch` configured to 0 and a fit without spread or drift)
         within_band = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0

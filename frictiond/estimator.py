@@ -489,6 +489,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._data_above_fit = 0.0
         self._numpy_residuals: np.ndarray | None = None
         self._innovation_score = 0.0
+        self._front_innovation_score = 0.0
         self._last_jump_s = -math.inf
         self._last_peak_slips: list[float] | None = None
         self._slip_support: list[float] | None = None
@@ -538,6 +539,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._wheel_shown_s = [-math.inf] * N_WHEELS
         self._shape_proximity = [0.0] * N_WHEELS
         self._innovation_score = 0.0
+        self._front_innovation_score = 0.0
         self._radius = None
         self._last_update_s = None
         self._jump_times.clear()

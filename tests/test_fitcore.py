@@ -506,11 +506,15 @@ def test_fit_window_is_weights_solve_and_bias_on_the_window(trim):
     np.testing.assert_array_equal(w.scratch[3, lo:hi], sw)
     np.testing.assert_array_equal(w.core_rows[lo:hi], rows)
     assert got[2] == pytest.approx(float(r_data @ r_data), rel=1e-13)
-    assert got[3] == first and got[4:] == bias
+    assert got[3] == first and got[4:7] == bias
+    # ... and the front wheels' (index 0, 1) alone, as residual_bias gives it on their samples.
+    front = w.wheel[lo:hi][first:] < 2
+    assert 0 < got[7] == front.sum() < m - first
+    assert got[8:] == core.residual_bias(r_data[first:][front], weights[first:][front], 0, sigma)
     # No sample at or after jump_t: no bias, none made up.
     assert core.fit_window(w.core_columns, lo, hi, now, tau, sigma, now + 1.0, x0.copy(), est._lb, est._ub, est._prior,
                            est._inv_prior_std, est._tie_rel_d, c_gradient, c_normal, est._core_constants, 0.5, 0,
-                           1e-6, 1e-6, 1e-8, 1e-3, 4, x0, 0)[3:] == (m, 0.0, 0.0, 0.0)
+                           1e-6, 1e-6, 1e-8, 1e-3, 4, x0, 0)[3:] == (m, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0)
     for bad_lo, bad_hi, bad_cached in ((hi, hi, 0), (lo, w.capacity + 1, 0), (lo, hi, m + 1), (-1, hi, 0)):
         with pytest.raises(ValueError, match="outside"):
             core.fit_window(w.core_columns, bad_lo, bad_hi, now, tau, sigma, jump_t, x0.copy(), est._lb, est._ub,

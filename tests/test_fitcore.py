@@ -172,17 +172,23 @@ def test_the_estimator_says_the_same_on_both_paths(theta, seed, noise, monkeypat
     curve = lugre_curve(p)
     samples = list(braking(lambda t, i: curve, seed=seed, noise=noise))
     compiled = LugreTrustRegionEstimator()
-    compiled_estimates = [compiled.update(s) for s in samples]
+    compiled_estimates, compiled_front = [], []
+    for s in samples:
+        compiled_estimates.append(compiled.update(s))
+        compiled_front.append(compiled._front_innovation_score)
     monkeypatch.setattr(tm, "_compiled", None)
     numpy_path = LugreTrustRegionEstimator()
     numpy_path.core = None
-    for s, a in zip(samples, compiled_estimates):
+    for s, a, front in zip(samples, compiled_estimates, compiled_front):
         b = numpy_path.update(s)
+        # (the front wheels' residual bias: fit_window's in C, `_innovation`'s in numpy)
+        assert front == pytest.approx(numpy_path._front_innovation_score, rel=1e-6, abs=1e-6)
         assert a.status == b.status
         assert a.mu_max == pytest.approx(b.mu_max, abs=1e-5)
         assert a.confidence == pytest.approx(b.confidence, abs=1e-4)
         assert (a.detail or {}).get("data_above_fit") == pytest.approx((b.detail or {}).get("data_above_fit"), abs=1e-4)
     assert compiled._fits > 100 and compiled._fits == numpy_path._fits
+    assert sum(f > 0.0 for f in compiled_front) > 50
     assert sum(e.status == Status.VALID for e in compiled_estimates) > 0.3 * len(samples)
 
 

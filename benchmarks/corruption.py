@@ -16,7 +16,10 @@ frames stepped back 1 s). Outputs are judged as a receiver decodes them off the 
   that withdraws a stop's early, accurate VALID outputs raises ΔMAE without bending any);
 - coverage: VALID outputs / the clean run's (lowest stop; and all stops together);
 - FAULT: share of outputs with status FAULT;
-- frames corrupted, crashes, outputs with NaN/inf.
+- frames corrupted, crashes, outputs with NaN/inf;
+- worst: the stop of the worst ΔMAE. A campaign stop is replayed alone, with the same corruption
+  (each stop's draw comes from its name), by `--first-seed SEED --stops 1 --simulator-stops 0`
+  with that row's `--kinds` and `--rates`; a simulator scenario by `--simulator`.
 
     python benchmarks/corruption.py [--stops 60] [--first-seed 0] [--simulator-stops 8] [--kinds 'random payload,bit flip'] [--rates 0.05]
 
@@ -177,7 +180,7 @@ def main(argv=None) -> int:
           f"MAE {np.nanmean([c.mae for _, c in kept]):.4f}, FAULT {sum(c.faults for _, c in kept) / max(1, sum(c.outputs for _, c in kept)):.2%}")
     stops, clean = [s for s, _ in kept], [c for _, c in kept]
     header = (f"{'kind':18} {'rate':>5} {'false VALID':>11} {'ΔMAE worst':>10} {'ΔMAE mean':>9} {'paired':>8} "
-              f"{'coverage min':>12} {'cov all':>8} {'FAULT':>6} {'frames':>7} {'crash':>5} {'NaN':>4}")
+              f"{'coverage min':>12} {'cov all':>8} {'FAULT':>6} {'frames':>7} {'crash':>5} {'NaN':>4}  worst")
     print(header)
     total_frames = crashes = nan = 0
     for kind in kinds:
@@ -188,7 +191,7 @@ def main(argv=None) -> int:
             nan += row["nan"]
             print(f"{kind:18} {rate:5.0%} {row['false']:11.2%} {row['dmae_worst']:+10.4f} {row['dmae_mean']:+9.4f} "
                   f"{row['paired_worst']:+8.4f} {row['cov_min']:12.2f} {row['cov_all']:8.2f} {row['fault']:6.2%} {row['frames']:7d} "
-                  f"{row['crashes']:5d} {row['nan']:4d}", flush=True)
+                  f"{row['crashes']:5d} {row['nan']:4d}  {row['worst']}", flush=True)
     print(f"corrupted frames in all: {total_frames}; crashes: {crashes}; outputs with NaN/inf: {nan}; "
           f"{time.perf_counter() - started:.0f} s")
     return 0
@@ -196,7 +199,7 @@ def main(argv=None) -> int:
 
 def _row(stops: list[Stop], clean: list[Outcome], kind: str, rate: float, seed: int) -> dict:
     valid = false = faults = outputs = frames_n = crashes = nan = 0
-    dmae, cov, paired = [], [], []
+    dmae, cov, paired, names = [], [], [], []
     for stop, base in zip(stops, clean):
         codec = input_codec_for(stop.config)
         # (each stop's corruption drawn from its name: a change that drops one stop from the kept
@@ -217,6 +220,7 @@ def _row(stops: list[Stop], clean: list[Outcome], kind: str, rate: float, seed: 
             cov.append(o.valid / base.valid)
             if o.valid:
                 dmae.append(o.mae - base.mae)
+                names.append(stop.name)
                 paired.append(o.paired_dmae(base))
     base_valid = sum(b.valid for b in clean)
     paired = [d for d in paired if d == d]
@@ -225,7 +229,8 @@ def _row(stops: list[Stop], clean: list[Outcome], kind: str, rate: float, seed: 
             "cov_all": valid / base_valid if base_valid else math.nan,
             "dmae_mean": float(np.mean(dmae)) if dmae else math.nan, "cov_min": min(cov) if cov else math.nan,
             "cov_mean": float(np.mean(cov)) if cov else math.nan, "fault": faults / outputs if outputs else 0.0,
-            "frames": frames_n, "crashes": crashes, "nan": nan}
+            "frames": frames_n, "crashes": crashes, "nan": nan,
+            "worst": names[int(np.argmax(dmae))] if dmae else "-"}
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ import math
 import re
 import select
 import socket
+import struct
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
@@ -350,6 +351,7 @@ class SocketcanDirect:
         self._capture = _sc.capture_message
         self._build = _sc.build_can_frame
         self._sock = sock
+        self._stamped = _KernelTimestamp(sock)
         self._channel = getattr(bus, "channel", None) or getattr(bus, "channel_info", None)
         sock.setblocking(False)
 
@@ -369,18 +371,53 @@ class SocketcanDirect:
 
     def _read(self) -> can.Message | None:
         """One queued frame, or None when nothing is queued."""
+        stamped = self._stamped
         try:
-            return self._capture(self._sock)
+            msg = self._capture(stamped)
         except can.CanOperationError as exc:
             if exc.error_code in (errno.EAGAIN, errno.EWOULDBLOCK):
                 return None
             raise
+        if msg is not None:
+            msg.timestamp = stamped.microseconds()
+        return msg
 
     def send(self, msg: can.Message) -> None:
         try:
             self._sock.send(self._build(msg))
         except OSError as error:
             raise can.CanOperationError(f"Failed to transmit: {error.strerror}", error.errno) from error
+
+
+class _KernelTimestamp:
+    """The socket as python-can's frame parser reads it, keeping the kernel's receive time.
+
+    python-can gives the time as `seconds + nanoseconds * 1e-9`; here it is truncated to the
+    microsecond, as candump writes it (the kernel's own timeval): a candump recording of the bus
+    then replays bit for bit what the daemon computed live. (An epoch time in a double resolves
+    only ~0.24 µs anyway, and a CAN frame lasts over 40 µs on the wire.)
+    """
+
+    __slots__ = ("_recvmsg", "_ancillary")
+
+    def __init__(self, sock: socket.socket) -> None:
+        self._recvmsg = sock.recvmsg
+        self._ancillary: list = []
+
+    def recvmsg(self, *args: int) -> tuple:
+        received = self._recvmsg(*args)
+        self._ancillary = received[1]
+        return received
+
+    def microseconds(self) -> float:
+        # (an exact integer count of µs over an exact 1e6: the double nearest the decimal time,
+        # the same one float() makes of candump's text)
+        _level, _kind, data = self._ancillary[0]
+        seconds, nanoseconds = _TIMESPEC.unpack_from(data)
+        return (seconds * 1_000_000 + nanoseconds // 1000) / 1e6
+
+
+_TIMESPEC = struct.Struct("@ll")
 
 
 def direct_io(bus: can.BusABC) -> SocketcanDirect | None:

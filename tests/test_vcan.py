@@ -84,8 +84,8 @@ def estimates(codec, frames):
 def trigger_caused(est_log_estimates, capture, replay_answered=None):
     """The daemon's estimates caused by a trigger frame (not by its stale-input tick).
 
-    The estimate log carries the trigger's socket time (ns, rounded to µs); candump prints the
-    same instant truncated to µs: they match within 2 µs. Times are put on candump's grid.
+    The estimate log carries the trigger's socket time, which the daemon reads on candump's
+    microsecond grid: the same number as candump's (2 µs of slack for a peer logging otherwise).
     A tick while frames are still queued is stamped with the last frame's time (`frame_now`):
     when that frame is a trigger the replay gives no output for (after a stall, the gate reads
     the gap as a clock step), an INPUT_STALE there is the tick's, which the replay has no loop for.
@@ -162,13 +162,16 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     # every frame the daemon sent is on the bus
     on_bus = [f for f in full_capture if f.can_id == ESTIMATE_ID]
     assert len(on_bus) == len(live)
-    # 1. the frames as they were on the bus (candump) through `frictiond replay`: the same status
-    # for (nearly) every update, MuMax within tolerance. (Not bit-identical: the daemon sees nanosecond
-    # socket times, candump keeps microseconds, and the estimate reacts to sub-µs timing at times;
-    # MuMax is only compared where it is meant to be trusted, VALID.)
+    # 1. the frames as they were on the bus (candump) through `frictiond replay`: the same status and
+    # MuMax for every update, as the daemon reads frame times on candump's microsecond grid. Unless
+    # the live loop ticked inside an input gap: it said INPUT_STALE before the next frame came, which
+    # the replay, having no loop, does not, and the updates while the filter warms up after the gap
+    # then repeat different statuses.
     assert [t for t, _, _ in caused] == [t for t, _, _ in from_capture]      # one estimate per trigger
     agree_capture = sum(a[1] == b[1] for a, b in zip(caused, from_capture)) / len(caused)
-    assert agree_capture >= 0.98, agree_capture
+    identical = sum(a[1:] == b[1:] for a, b in zip(caused, from_capture)) / len(caused)
+    gap_ticks = [t for t, _, _ in ticks if caused[0][0] < t < caused[-1][0]]
+    assert identical == 1.0 or (gap_ticks and agree_capture >= 0.98), (identical, agree_capture, gap_ticks)
     assert compressed(s for _, s, _ in caused)[:3] == compressed(s for _, s, _ in from_capture)[:3]
     # (no VALID at all when canplayer's bursts were refused throughout; check 2 then does not apply)
     worst_capture = max((abs(a[2] - b[2]) for a, b in zip(caused, from_capture) if a[1] == b[1] == "VALID"),
@@ -206,7 +209,8 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     log_inputs = [f.time_s for f in played if f.can_id == TRIGGER_ID]
     jitter = max(abs((a - capture_inputs[0]) - (b - log_inputs[0])) for a, b in zip(capture_inputs, log_inputs))
     assert all(s == "INPUT_STALE" for _, s, _ in ticks)
-    return {"updates": len(caused), "ticks": len(ticks), "status_agreement_vs_capture": round(agree_capture, 4),
+    return {"updates": len(caused), "ticks": len(ticks), "ticks_in_input_gaps": len(gap_ticks),
+            "status_agreement_vs_capture": round(agree_capture, 4),
             "max_valid_mu_diff_vs_capture": round(worst_capture, 4), "status_agreement_vs_log": round(agree, 4),
             "max_valid_mu_diff_vs_log": round(worst, 4), "max_settled_mu_diff_vs_log": round(worst_settled, 4),
             "max_playback_timing_error_s": round(jitter, 4), "playback_gaps_not_in_log": sorted(playback_gaps),

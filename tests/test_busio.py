@@ -1,0 +1,65 @@
+"""The SocketCAN receive path's frame times: on candump's microsecond grid, so that a candump
+recording of the bus replays exactly what the daemon computed live."""
+from __future__ import annotations
+
+import socket
+import struct
+import time
+from types import SimpleNamespace
+
+import can
+import pytest
+from can.interfaces.socketcan import constants
+from can.interfaces.socketcan.socketcan import build_can_frame
+
+from frictiond.busio import SocketcanDirect, message_to_frame
+
+
+class _OneFrameSocket:
+    """A socket whose one queued frame carries the given kernel receive time (s, ns)."""
+
+    def __init__(self, seconds: int, nanoseconds: int) -> None:
+        self.stamp = struct.pack("@ll", seconds, nanoseconds)
+
+    def setblocking(self, flag: bool) -> None:
+        pass
+
+    def recvmsg(self, bufsize: int, ancbufsize: int) -> tuple:
+        frame = build_can_frame(can.Message(arbitration_id=0xB0, data=b"\x01\x02", is_extended_id=False))
+        return frame, [(socket.SOL_SOCKET, constants.SO_TIMESTAMPNS, self.stamp)], 0, ("vcan0",)
+
+
+@pytest.mark.parametrize("nanoseconds", [862_652_000, 862_652_999, 862_652_500, 0, 999_999_999])
+def test_receive_time_is_the_kernel_time_truncated_to_the_microsecond_as_candump_prints_it(nanoseconds):
+    seconds = 1_795_886_605
+    direct = SocketcanDirect(SimpleNamespace(channel="vcan0"), _OneFrameSocket(seconds, nanoseconds))
+    frame = message_to_frame(direct.recv(0.0))
+    # the float candump's text "(1795886605.862652)" reads as
+    assert frame.time_s == float(f"{seconds}.{nanoseconds // 1000:06d}")
+    assert frame.can_id == 0xB0 and frame.data == b"\x01\x02"
+
+
+def test_a_real_socket_timestamp_lands_on_the_microsecond_grid():
+    # A UDP socket carries the same SO_TIMESTAMPNS ancillary data a CAN_RAW socket does; its payload
+    # here is a CAN frame, so python-can's own parser reads it.
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.setsockopt(socket.SOL_SOCKET, constants.SO_TIMESTAMPNS, 1)
+        direct = SocketcanDirect(SimpleNamespace(channel="lo"), receiver)
+        times = []
+        for i in range(20):
+            sender.sendto(build_can_frame(can.Message(arbitration_id=0x100 + i, data=bytes([i]))),
+                          receiver.getsockname())
+            msg = direct.recv(1.0)
+            assert msg is not None and msg.arbitration_id == 0x100 + i
+            times.append(msg.timestamp)
+        # (python-can's seconds + ns·1e-9 is off this grid for all but ~1 in 1000 frames)
+        assert all(t == float(f"{t:.6f}") for t in times), times
+        assert all(abs(t - time.time()) < 5.0 for t in times)
+        assert times == sorted(times)
+        assert direct.recv(0.0) is None          # nothing queued: None, not an error
+    finally:
+        receiver.close()
+        sender.close()

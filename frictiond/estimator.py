@@ -136,9 +136,11 @@ class LugreTROptions:
     peak_extrapolation: float = 1.6       # μ_max is not read beyond this multiple of the slips seen
     extrapolation_max_slip: float = 0.3   # ... nor beyond this slip where the slips seen did not go
     min_utilisation: float = 0.8          # measured μ (90 % quantile) must reach this share of μ_max
-    valid_confidence: float = 0.55        # VALID is entered here ...
-    keep_valid_confidence: float = 0.5    # ... and kept down to this (no one-cycle flicker): every VALID output
-    #   is more likely than not within `confidence_band`
+    # The confidence is P(|error| ≤ band) under a normal error of the fit's σ; the same σ puts
+    # 1 − erf(2·erfinv(c)) on an error past twice the band (20 %: a false VALID): 18 % at c = 0.5,
+    # 9 % at 0.6, 6 % at 0.65. A VALID must make that error unlikely, not only a 10 % one likely.
+    valid_confidence: float = 0.65        # VALID is entered here ...
+    keep_valid_confidence: float = 0.6    # ... and kept down to this (no one-cycle flicker)
     confidence_band: float = 0.10         # the confidence is the probability of μ_max within this share of the road's
     evidence_interval_s: float = 0.35     # the data tell about the peak once per this long (an ABS cycle), not
     #   once per sample: μ_max's spread grows by √(this / the sample period)

@@ -4,6 +4,8 @@ Seed 0 of every case in `benchmarks/accuracy.py`, through the full pipeline (fra
 the default DBC). Limits are the achieved figures with a margin, never looser than issue 3's
 targets where the estimator meets them: MAE ≤ 0.05 and ≤ 12 %, VALID ≥ 80 % of the evaluated
 span, converged within 0.3 s, re-converged within 0.5 s after a μ jump, false VALID ≤ 1 %.
+VALID is entered at confidence 0.65 (a false VALID unlikely, not only a 10 % error): where that
+took VALID outputs the limits say so.
 """
 from __future__ import annotations
 
@@ -30,7 +32,8 @@ LIMITS = {
     "dry": (0.035, 0.04, 0.95, 0.3, None),
     # A runaway must run on to lock-up (or an ABS release it) before it counts: the first evidence
     # a cycle later moves the fits after it by 0.0002 (MAE 0.0299 → 0.0301 over the same outputs).
-    "dry/burckhardt": (0.031, 0.035, 0.93, 0.3, None),
+    # (VALID from confidence 0.65: 0.922 of the span, was 0.95.)
+    "dry/burckhardt": (0.031, 0.035, 0.9, 0.3, None),
     "dry/ref": (0.035, 0.04, 0.95, 0.3, None),
     "wet": (0.03, 0.05, 0.95, 0.3, None),
     # The MF curve on wet asphalt: a late jump of the fit (~6 % at 3 s, low speed) costs ~0.1 s of VALID.
@@ -39,7 +42,8 @@ LIMITS = {
     "snow": (0.012, 0.05, 0.95, 0.3, None),
     "snow/burckhardt": (0.008, 0.04, 0.95, 0.3, None),
     # Burckhardt ice: μ_max 0.034, already 96 % of it at 1 % slip (a plateau, ABS holds 1-2 %).
-    "ice": (0.005, 0.08, 0.9, 0.3, None),
+    # Confidence 0.65, VALID's threshold, comes 0.34 s after the onset: issue 3's 0.3 s missed.
+    "ice": (0.005, 0.08, 0.9, 0.36, None),
     # The same ice at 35 m/s (μ_max 0.026): the ABS holds the wheels past the peak at nearly
     # constant slip, which stays evidence of the peak once the stop has shown it. (A VALID once
     # withdrawn is not held again when no sample is usable: 0.955 → 0.941 here.)
@@ -51,11 +55,12 @@ LIMITS = {
     # at 0.4-0.7 of its secant: not at the peak, so CONVERGING there, short of issue 3's 80 %.
     "cobblestone_wet": (0.025, 0.05, 0.65, 0.3, None),
     "dry_to_wet": (0.02, 0.03, 0.85, 0.3, 0.5),
-    # VALID entered at confidence 0.55 and kept to 0.5 (every VALID more likely than not within
-    # 10 %): after the change of road the MF fit's spread keeps it out a few cycles longer.
+    # After the change of road the MF fit's spread keeps the confidence below VALID's threshold
+    # a few cycles longer.
     "dry_to_wet/mf": (0.05, 0.065, 0.8, 0.3, None),
     "split_mu": (0.01, 0.025, 0.95, 0.3, None),
-    "noisy": (0.015, 0.025, 0.95, 0.3, None),
+    # (VALID from confidence 0.65: 0.914 of the span.)
+    "noisy": (0.015, 0.025, 0.9, 0.3, None),
     "noisy/ref": (0.02, 0.03, 0.95, 0.3, None),
     # (The same: the first VALID 0.06 s later, 0.36 s after the slip first passes 5 %.)
     "cornering": (0.025, 0.025, 0.95, 0.4, None),
@@ -102,11 +107,12 @@ def test_ice_magic_formula(reports):
     # together; the speed observer must not take released wheels spinning back up for free
     # rolling. The early fits (wheels locking within 0.1 s) are off by 7-10 %, and their spread
     # (6-9 % of μ_max from 60 samples of one ABS cycle) is that of one piece of evidence: VALID
-    # once further ABS cycles have added samples nearer the peak, 0.87 s after the onset.
+    # once further ABS cycles have added samples nearer the peak: confidence 0.65, VALID's
+    # threshold, 1.22 s after the onset (0.86 of the span).
     r = reports[("ice/mf", "lugre-tr")]
     assert r.mae_rel <= 0.06, f"relative MAE {r.mae_rel:.4f}"
-    assert r.valid_share >= 0.92, f"VALID share {r.valid_share:.3f}"
-    assert r.convergence_s <= 1.0, f"convergence {r.convergence_s:.3f} s"
+    assert r.valid_share >= 0.84, f"VALID share {r.valid_share:.3f}"
+    assert r.convergence_s <= 1.3, f"convergence {r.convergence_s:.3f} s"
     assert r.false_valid_count <= 0.03 * r.valid_count, f"false VALID {r.false_valid_count}/{r.valid_count}"
 
 

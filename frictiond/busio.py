@@ -12,7 +12,6 @@ import math
 import re
 import select
 import socket
-import struct
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
@@ -351,7 +350,7 @@ class SocketcanDirect:
         self._capture = _sc.capture_message
         self._build = _sc.build_can_frame
         self._sock = sock
-        self._stamped = _KernelTimestamp(sock)
+        self._stamped = _KernelTimestamp(sock, _sc.RECEIVED_TIMESTAMP_STRUCT)
         self._channel = getattr(bus, "channel", None) or getattr(bus, "channel_info", None)
         sock.setblocking(False)
 
@@ -398,11 +397,12 @@ class _KernelTimestamp:
     only ~0.24 µs anyway, and a CAN frame lasts over 40 µs on the wire.)
     """
 
-    __slots__ = ("_recvmsg", "_ancillary")
+    __slots__ = ("_recvmsg", "_ancillary", "_timespec")
 
-    def __init__(self, sock: socket.socket) -> None:
+    def __init__(self, sock: socket.socket, timespec: Any) -> None:
         self._recvmsg = sock.recvmsg
         self._ancillary: list = []
+        self._timespec = timespec      # python-can's own struct timespec layout
 
     def recvmsg(self, *args: int) -> tuple:
         received = self._recvmsg(*args)
@@ -413,11 +413,8 @@ class _KernelTimestamp:
         """The last frame's receive time, s, on the µs grid. (An exact integer count of µs over an
         exact 1e6: the double nearest the decimal time, the one float() makes of candump's text.)"""
         _level, _kind, data = self._ancillary[0]
-        seconds, nanoseconds = _TIMESPEC.unpack_from(data)
+        seconds, nanoseconds = self._timespec.unpack_from(data)
         return (seconds * 1_000_000 + nanoseconds // 1000) / 1e6
-
-
-_TIMESPEC = struct.Struct("@ll")
 
 
 def direct_io(bus: can.BusABC) -> SocketcanDirect | None:

@@ -30,7 +30,9 @@ Design (the choices model.md leaves open, and why):
 The excitation evidence is `peak_evidence.PeakEvidence`, the confidence and the vetoes on VALID
 `estimate_confidence.EstimateConfidence`, the report of a fit (peaks, spread, status, hold)
 `estimate_report.EstimateReport`, the fit itself and the jump test on its residuals
-`window_fit.WindowFit`: parts of the estimator class, each in its own module.
+`window_fit.WindowFit`, the parameter vector and its mapping to the tyre model's parameters
+`fit_parameters.FitParameters`, the brake-gain balance between the axles
+`axle_balance.AxleBalance`: parts of the estimator class, each in its own module.
 """
 from __future__ import annotations
 
@@ -52,8 +54,10 @@ from .samples import FrictionEstimate, PhysicalSample, Status
 from .speed_error import SpeedErrorBound, SpeedErrorOptions
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta
 from .vehicle import VehicleParams
+from .axle_balance import AxleBalance
 from .estimate_confidence import EstimateConfidence
 from .estimate_report import EstimateReport
+from .fit_parameters import FitParameters
 from .peak_evidence import N_WHEELS, PeakEvidence, _Runaway
 from .window_fit import WindowFit
 
@@ -396,7 +400,8 @@ class _SmoothedMaximum:
         self.highest = 0.0
 
 
-class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, EstimateReport):
+class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, EstimateReport, FitParameters,
+                                AxleBalance):
     """Recursive, bounded trust-region NLLS fit of static LuGre; one `update` per bus cycle."""
 
     kind = "lugre-tr"
@@ -421,33 +426,9 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         # that outgrows it loses its oldest quarter); bounded so that a window_s of hours does not
         # preallocate gigabytes.
         self._window_capacity = int(min(max(4096.0, 8 * o.window_s / sample_period_s + 64), 1 << 17))
-        # x: ln θ per wheel, then σ0, v_s, σ2 divided by their nominal values.
-        self._scale = np.array([1.0] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, max(o.prior_sigma2, 1e-3)])
-        self._lb = np.array([math.log(o.theta_min)] * N_WHEELS + [o.sigma0_min, o.v_s_min, o.sigma2_min]) / self._scale
-        self._ub = np.array([math.log(o.theta_max)] * N_WHEELS + [o.sigma0_max, o.v_s_max, o.sigma2_max]) / self._scale
-        self._lb_list, self._ub_list = self._lb.tolist(), self._ub.tolist()
-        self._theta_bounds = list(zip(self._lb_list[:N_WHEELS], self._ub_list[:N_WHEELS]))
-        self._prior_std = np.array([o.prior_std_log_theta] * N_WHEELS + [o.prior_std_sigma0, o.prior_std_v_s,
-                                                                         o.prior_std_sigma2]) / self._scale
-        self._base = LugreParams(mu_c=o.mu_c, mu_s=o.mu_s, alpha=o.alpha, patch_length=o.patch_length)
+        self._init_parameter_space(o)
         self._saved_prior: np.ndarray | None = None
-        self._J_prior = np.diag(1.0 / self._prior_std)
-        # Soft ties between wheels' ln θ: front–rear on each side, left–right on each axle.
-        self._tie_a = np.array([0, 1, 0, 2])
-        self._tie_b = np.array([2, 3, 1, 3])
-        self._tie_rel = np.array([o.front_rear_coupling, o.front_rear_coupling,
-                                  o.left_right_coupling, o.left_right_coupling])
-        if self._scale[0] != 1.0:
-            raise AssertionError("ln θ is fitted unscaled")
         self._work: np.ndarray | None = None
-        # The priors and ties as rows appended to the data (see `_normal`): (x − prior)/std and
-        # (ln θ_a − ln θ_b)/rel, both linear in x.
-        self._inv_prior_std = 1.0 / self._prior_std
-        self._prior_rows = np.diag(self._inv_prior_std)
-        self._tie_rel_d = np.zeros((len(self._tie_a), N_WHEELS))   # rows (e_a − e_b)/rel
-        for k, (a, b, rel) in enumerate(zip(self._tie_a, self._tie_b, self._tie_rel)):
-            self._tie_rel_d[k, a], self._tie_rel_d[k, b] = 1.0 / rel, -1.0 / rel
-        self._tie_rows_t = self._tie_rel_d.T.copy()
         self._alpha = float(o.alpha)
         self._shared_scale = tuple(float(v) for v in self._scale[N_WHEELS:])
         self._prior_peak: tuple[tuple, tuple] | None = None   # (speed, prior) → peak of the prior
@@ -709,57 +690,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         lo = w.start + int(w.time[w.start:w.end].searchsorted(since, side="left"))
         return _spread_loss_numpy(w, lo, thetas, self._params(self._x))
 
-    @staticmethod
-    def _thetas(x: np.ndarray) -> np.ndarray:
-        """Each wheel's θ from the fitted ln θ."""
-        return np.exp(x[:N_WHEELS])
-
-    def _floats_of_x(self) -> tuple[list[float], list[float], tuple[float, ...]]:
-        """The fitted point as floats: (x, each wheel's θ, `_compiled_params(x)`), kept until
-        `_x` is replaced (each fit makes a new array; nothing changes one in place)."""
-        x = self._x
-        cached = self._x_floats
-        if cached is None or cached[0] is not x:
-            xs = x.tolist()
-            exp = math.exp   # (np.exp of four numbers costs more than the four calls)
-            thetas = [exp(xs[0]), exp(xs[1]), exp(xs[2]), exp(xs[3])]
-            cached = self._x_floats = (x, xs, thetas, self._params_entry_of(tuple(xs[N_WHEELS:]))[0])
-        return cached[1], cached[2], cached[3]
-
-    def _params(self, x: np.ndarray) -> LugreParams:
-        entry = self._params_entry(x)
-        if entry[1] is None:
-            sigma0, v_s, sigma2 = entry[0][3], entry[0][5], entry[0][6]
-            b = self._base
-            entry[1] = LugreParams(theta=1.0, sigma0=sigma0, sigma2=sigma2, mu_c=b.mu_c, mu_s=b.mu_s, v_s=v_s,
-                                   alpha=b.alpha, patch_length=b.patch_length)
-        return entry[1]
-
-    def _compiled_params(self, x: np.ndarray) -> tuple[float, ...]:
-        """`compiled_params(self._params(x))` (σ0, v_s, σ2 at 3, 5, 6), without building the
-        LugreParams (a frozen dataclass costs more than the compiled calls it feeds)."""
-        return self._params_entry(x)[0]
-
-    def _params_entry(self, x: np.ndarray) -> list:
-        """[compiled parameters, LugreParams or None until asked for] of the shared parameters in x."""
-        return self._params_entry_of(tuple(x[N_WHEELS:].tolist()))
-
-    def _params_entry_of(self, key: tuple[float, ...]) -> list:
-        """`_params_entry` of the shared parameters as floats."""
-        cached = self._params_cache
-        if cached is not None and cached[0] == key:
-            return cached[1]
-        sigma0, v_s, sigma2 = (v * s for v, s in zip(key, self._shared_scale))
-        b = self._base
-        entry = [(b.mu_c, b.mu_s - b.mu_c, b.alpha, sigma0, sigma0 * b.patch_length, v_s, sigma2), None]
-        self._params_cache = (key, entry)
-        return entry
-
     def _weights(self, now_s: float, times: np.ndarray) -> np.ndarray:
         return np.exp(np.minimum(times - now_s, 0.0) / self.options.forgetting_time_constant)
-
-            # (`_peak_seen_speed` stays: the stop is still in ABS, only on another road; a wheel held
-            # past the new fit's peak is evidence of it as much as of the old one's.)
 
     def _due(self, step: int) -> bool:
         """Whether this fit refreshes one of the slow-moving quantities (0 slip range, 1 excitation,
@@ -768,43 +700,6 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         latency); every fit when `excitation_every` ≤ 1."""
         every = self.options.excitation_every
         return every <= 1 or self._fits % every == step % every
-
-    def _axle_scale(self, wheel: int) -> float:
-        """Correction of a wheel's utilised μ for the front/rear brake-gain split (see below)."""
-        a = self._axle_balance
-        return math.exp(0.35 * a) if wheel < 2 else math.exp(-0.65 * a)
-
-    def _axle_scales(self) -> tuple[float, float]:
-        """(front, rear) `_axle_scale`, kept until the balance moves (it rests between stops)."""
-        cached = self._axle_scales_cache
-        if cached[0] != self._axle_balance:
-            cached = self._axle_scales_cache = (self._axle_balance, (self._axle_scale(0), self._axle_scale(2)))
-        return cached[1]
-
-    def _balance_axles(self, now_s: float, wheel_mu: np.ndarray) -> None:
-        """Learn the front/rear split of the brake-gain error.
-
-        Pad friction drifts per axle (±20 %); the front end's body-equation check only fixes the
-        total. On one road the front and rear tyres' peaks agree, so a lasting front/rear ratio
-        of the fitted peaks is a brake-gain split: it is removed slowly (time constant
-        `axle_balance_time_constant`), weighting the axles by their usual share of the braking
-        force (≈ 65/35) so the total stays what the body equation says. Brief real front/rear
-        differences (a μ change crossing the wheelbase) last a fraction of a second and barely
-        move it.
-        """
-        o = self.options
-        last = self._last_update_s
-        self._last_update_s = now_s
-        if last is None or o.axle_balance_time_constant <= 0:
-            return
-        dt = min(max(now_s - last, 0.0), 0.1)
-        # Both axles among the samples weighted above e⁻¹ (younger than the forgetting time).
-        since = now_s - o.forgetting_time_constant
-        if not (self._window.has_recent(0, since) and self._window.has_recent(1, since)):
-            return
-        ratio = float(wheel_mu[0] + wheel_mu[1]) / max(float(wheel_mu[2] + wheel_mu[3]), 1e-6)
-        self._axle_balance += (dt / o.axle_balance_time_constant) * math.log(max(ratio, 1e-6)) * -1.0
-        self._axle_balance = min(max(self._axle_balance, -o.axle_balance_limit), o.axle_balance_limit)
 
     # ------------------------------------------------------------------------------ tools
     def mu_curve(self, slip: np.ndarray, speed_mps: float, wheel: int | None = None) -> np.ndarray:

@@ -11,14 +11,10 @@ rejected becomes a fault that names it. `DoubtfulInputs` is a part of `frontend.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 from .body_equation import LEARNT_STATE
 from .input_names import WHEEL_SPEED_NAMES
-from .samples import PhysicalSample
-
-if TYPE_CHECKING:
-    from .frontend import FrontEndResult
+from .samples import FrontEndResult, PhysicalSample
 
 # A braked wheel turns no faster than the car moves, but for: its tyre's rolling radius against
 # the configured one (this share of the speed), the wheel speeds' noise and the speed estimate's

@@ -70,3 +70,15 @@ class FrictionEstimate:
     wheel_mu_max: Quad = (0.0, 0.0, 0.0, 0.0)
     mu_max_std: float = float("inf")
     detail: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class FrontEndResult:
+    """Outcome of one trigger frame in the front end (`frontend.FrontEnd.push`)."""
+
+    sample: PhysicalSample | None       # None while the filter warms up or after a fault
+    stale_messages: tuple[str, ...] = ()
+    fault: str | None = None
+    # Wheels whose speed sensor reads (near) zero while the car rolls on: excluded from the
+    # sample; the estimate goes on with the others, but must not be called VALID.
+    dead_wheels: tuple[int, ...] = ()

@@ -5,9 +5,11 @@ Savitzky–Golay filter on the real timestamps, so that jitter and lost frames d
 derivative), read at the window's centre: ω and ω̇ there, the weights with which the torques set
 against ω̇ are averaged the same way, a sensor glitch told from a wheel's physics (one sample off
 both its neighbours by more than a wheel's acceleration can change within a sample), and each
-wheel's slips at the ends of that average. `WheelSpeedFilter` is a part of `frontend.FrontEnd`
-(its wheel-speed window and settings are the front end's); `_frontcore.fit_wheels` is the same
-fit compiled, and the code here the fallback and the reference (tests compare).
+wheel's slips at the ends of that average; and the window's intake: its size for the trigger's
+cycle time, each frame's speeds counted as repeats (a stuck sensor) and timed, the window
+restarted after a gap. `WheelSpeedFilter` is a part of `frontend.FrontEnd` (its wheel-speed
+window and settings are the front end's); `_frontcore.fit_wheels` is the same fit compiled, and
+the code here the fallback and the reference (tests compare).
 """
 from __future__ import annotations
 
@@ -23,11 +25,65 @@ from .samples import PhysicalSample
 # thousand bar/s on ~25 N·m/bar over ~1.2 kg·m², and the tyre force past its peak): a sample further
 # than this × dt² off its own trend is suspect until confirmed or repaired.
 SUSPECT_JERK_RADPS3 = 80_000.0
+MIN_SAMPLE_PERIOD_S = 0.004    # the per-sample constants are never set for a faster trigger than this
 
 
 class WheelSpeedFilter:
-    """The fit over the front end's wheel-speed window (`_wheel_times`, `_wheel_speeds`) and what
-    it yields besides ω and ω̇: the torque weights (`_torque_weights`), glitches, slip spreads."""
+    """The front end's wheel-speed window (`_wheel_times`, `_wheel_speeds`), the fit over it and
+    what that yields besides ω and ω̇: the torque weights (`_torque_weights`), glitches, slip spreads."""
+
+    def _size_filter(self) -> None:
+        """The per-sample constants, for the trigger's cycle time."""
+        options, trigger = self.options, self.trigger_message
+        # One wheel-speed sample per trigger: the per-sample constants (the derivative window,
+        # the forgetting of the brake-gain and accelerometer-offset learning) are set for the
+        # trigger's cycle time, not for 10 ms. A 7-sample window at 20 ms spans 0.12 s, over
+        # which an ABS cycle's wheel speed is no quadratic: every other sample was a "glitch".
+        # (Not below 4 ms: the daemon's flood guard passes at most 250 updates/s by default, and a
+        # DBC claiming 1 ms would otherwise size a 61-sample window for frames that come slower.)
+        self.declared_period_s = (self._history[trigger].period_s if trigger in self._history
+                                  else options.default_period)
+        self.sample_period_s = max(MIN_SAMPLE_PERIOD_S, self.declared_period_s)
+        # A glitch is off its neighbours by more than noise and more than a wheel's acceleration
+        # can change within a sample: at 20 ms (50 Hz wheel speeds) a wheel recovering from deep
+        # slip and overshooting is sampled as a zig-zag of ~10 rad/s on both front wheels alike.
+        self.glitch_threshold = options.spike_threshold + SUSPECT_JERK_RADPS3 * self.sample_period_s ** 2
+        # The wheels' fit spans `derivative_span_s` but takes at least 5 samples (the glitch test
+        # needs two on each side); the ω̇ the torques are set against in μ spans only the samples
+        # within `derivative_span_s` (3 at 20 ms): averaged over 80 ms, the top of an ABS cycle
+        # read μ 0.038 low at 50 Hz, over 40 ms 0.016.
+        span_samples = max(3, 2 * round(options.derivative_span_s / self.sample_period_s / 2) + 1)
+        self.derivative_window = options.derivative_window or max(5, span_samples)
+        self.torque_window = options.derivative_window or span_samples
+
+    def _push_wheel_speeds(self, time_s: float, speeds: tuple[float, float, float, float]) -> None:
+        """The wheel speeds of a trigger frame into the derivative window: counted as repeats
+        (a stuck sensor), timed (the trigger's measured cycle), the window restarted after a
+        gap or a jump back in time."""
+        opts = self.options
+        fl, fr, rl, rr = speeds
+        # A sensor that repeats exactly the same reading frame after frame while the car
+        # changes speed is stuck (quantised noise makes exact repeats rare on a live sensor).
+        repeats, previous = self._repeats, self._previous_speeds
+        repeats[0] = repeats[0] + 1 if fl == previous[0] and fl > 1.0 else 0
+        repeats[1] = repeats[1] + 1 if fr == previous[1] and fr > 1.0 else 0
+        repeats[2] = repeats[2] + 1 if rl == previous[2] and rl > 1.0 else 0
+        repeats[3] = repeats[3] + 1 if rr == previous[3] and rr > 1.0 else 0
+        self._previous_speeds = speeds
+        dt = time_s - self._last_trigger_s
+        if 0.0 < dt <= opts.max_gap:
+            # The trigger's actual cycle time (a slow mean: lost frames barely move it), set
+            # against the DBC's, which the per-sample constants were sized for.
+            self._triggers_timed += 1
+            self._trigger_period_s += (dt - self._trigger_period_s) / min(self._triggers_timed, 100)
+        if dt <= 0.0 or dt > opts.max_gap:
+            # A gap or a jump back in time: the derivative window must not straddle it.
+            self._wheel_times.clear()
+            self._wheel_speeds.clear()
+            self._speed_time_s = None
+        self._last_trigger_s = time_s
+        self._wheel_times.append(time_s)
+        self._wheel_speeds.append(speeds)  # type: ignore[arg-type]
 
     def _fit_wheels(self) -> tuple[float, list[float], list[float], bool]:
         """`_fit_window`, and when it finds a glitch (`_glitch_value`), the sample repaired in the

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -224,6 +224,86 @@ def _step_inside(s_h: list[float], d: list[float], lower_room: list[float],
     return s, s_h
 
 
+def _interior_start(x0: np.ndarray, lbl: list[float], ubl: list[float], inner_lbl: list[float],
+                    inner_ubl: list[float]) -> np.ndarray:
+    """x0 clipped to the box, then into its interior: trf-style, a bound-touching start has no
+    room to scale."""
+    return np.array([min(max(min(max(v, lo), hi), ilo), ihi)
+                     for v, lo, hi, ilo, ihi in zip(np.asarray(x0, dtype=float).tolist(), lbl, ubl, inner_lbl,
+                                                    inner_ubl)])
+
+
+def _initial_radius(x: np.ndarray, g: np.ndarray, lb: np.ndarray, ub: np.ndarray, fin_lb: np.ndarray,
+                    fin_ub: np.ndarray) -> float:
+    """The trust radius for a cold start: ‖x/d‖ in the scaled variables (1 at the origin)."""
+    v, _ = _scaling(x, (g < 0) & fin_ub, (g > 0) & fin_lb, lb, ub)
+    return math.sqrt(float(np.sum(x * x / v))) or 1.0
+
+
+def _scaled_model(N: np.ndarray, d: list[float], g_h: list[float], g_dv: list[float],
+                  diagonal: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, tuple] | None:
+    """The scaled subproblem's matrix H = D N D + diag(g·dv/dx) and its eigen-decomposition
+    (w, Q, Qᵀĝ) for `_subproblem`; None if H is not finite."""
+    d_arr = np.array(d)
+    H = N * np.multiply.outer(d_arr, d_arr)
+    H[diagonal] += g_dv
+    if not np.isfinite(H).all():
+        return None
+    w, Q = _eigh(H)
+    return H, (w, Q, np.array(g_h) @ Q)
+
+
+def _updated_radius(radius: float, actual: float, predicted: float, step_norm: float) -> float:
+    """The trust radius after a step, from the ratio of actual to predicted reduction."""
+    ratio = actual / predicted if predicted > 0 else -1.0
+    if ratio < 0.25:
+        return 0.25 * step_norm if step_norm > 0 else 0.25 * radius
+    if ratio > 0.75 and step_norm >= 0.95 * radius:
+        return radius * 2.0
+    return radius
+
+
+class _Trial(NamedTuple):
+    """An accepted step: the new point, its (unscaled) step, the cost reduction and `fun` there."""
+    x: np.ndarray
+    step: list[float]
+    actual: float
+    evaluation: tuple[float, np.ndarray, np.ndarray, object]
+
+
+def _decreasing_step(fun: NormalFunction, xl: list[float], cost: float, H: np.ndarray, eig: tuple,
+                     g_h: list[float], d: list[float], gh_max: float, box: tuple, radius: float,
+                     max_rejections: int, predicted_ftol: float) -> tuple[_Trial | None, float, int]:
+    """Shrink the radius until a step from xl decreases the cost: (the accepted step, or None when
+    the point is to be kept as converged; the updated radius; the evaluations spent)."""
+    _, _, _, _, _, _, lbl, ubl, _, _, inner_lbl, inner_ubl = box
+    n = len(xl)
+    sqrt = math.sqrt
+    theta = max(0.995, 1.0 - gh_max)
+    upper_room = [theta * (ubl[i] - xl[i]) for i in range(n)]
+    lower_room = [theta * (lbl[i] - xl[i]) for i in range(n)]
+    evaluations = 0
+    for _attempt in range(max_rejections):
+        s, s_h = _step_inside(_subproblem(eig, radius).tolist(), d, lower_room, upper_room)
+        s_arr = np.array(s_h)
+        predicted = -(sum(g_h[i] * s_h[i] for i in range(n)) + 0.5 * float(s_arr @ H @ s_arr))
+        if predicted_ftol > 0 and predicted < predicted_ftol * cost:
+            return None, radius, evaluations
+        # Iterates stay as far inside as the start is put: the result, passed back in as the
+        # next warm start, is then used exactly as returned.
+        x_new = np.array([min(max(xl[i] + s[i], inner_lbl[i]), inner_ubl[i]) for i in range(n)])
+        evaluation = fun(x_new)
+        evaluations += 1
+        cost_new = evaluation[0]
+        actual = cost - cost_new
+        radius = _updated_radius(radius, actual, predicted, sqrt(sum(v * v for v in s_h)))
+        if actual > 0 and math.isfinite(cost_new):
+            return _Trial(x_new, s, actual, evaluation), radius, evaluations
+        if radius < 1e-12 * (1.0 + sqrt(sum(v * v for v in xl))):
+            return None, radius, evaluations
+    return None, radius, evaluations
+
+
 def solve_normal(
     fun: NormalFunction,
     x0: np.ndarray,
@@ -249,15 +329,13 @@ def solve_normal(
     `predicted_ftol`·cost (the quadratic model says the point is as good as converged): for a
     recursive caller, whose next update continues anyway, it saves an evaluation per update.
     """
-    lb, ub, fin_lb, fin_ub, inner_lb, inner_ub, lbl, ubl, fin_lbl, fin_ubl, inner_lbl, inner_ubl = _box(lb, ub)
-    # Strictly interior start: trf-style, a bound-touching start has no room to scale.
-    x = np.array([min(max(min(max(v, lo), hi), ilo), ihi)
-                  for v, lo, hi, ilo, ihi in zip(np.asarray(x0, dtype=float).tolist(), lbl, ubl, inner_lbl, inner_ubl)])
+    box = _box(lb, ub)
+    lb, ub, fin_lb, fin_ub, _, _, lbl, ubl, fin_lbl, fin_ubl, inner_lbl, inner_ubl = box
+    x = _interior_start(x0, lbl, ubl, inner_lbl, inner_ubl)
     cost, g, N, extra = initial if initial is not None else fun(x)
     evaluations = 1
     if radius is None or not math.isfinite(radius) or radius <= 0:
-        v, _ = _scaling(x, (g < 0) & fin_ub, (g > 0) & fin_lb, lb, ub)
-        radius = math.sqrt(float(np.sum(x * x / v))) or 1.0
+        radius = _initial_radius(x, g, lb, ub, fin_lb, fin_ub)
     converged = False
     iterations = 0
     # The n-vectors (a handful of entries) are handled as floats: fused loops instead of a
@@ -271,46 +349,19 @@ def solve_normal(
         if not nan and gv_max < gtol:
             converged = True
             break
-        d_arr = np.array(d)
-        H = N * np.multiply.outer(d_arr, d_arr)
-        H[diagonal] += g_dv
-        if not np.isfinite(H).all():
+        model = _scaled_model(N, d, g_h, g_dv, diagonal)
+        if model is None:
             break   # (a non-finite Jacobian: nothing to step on; the caller keeps x)
-        w, Q = _eigh(H)
-        eig = (w, Q, np.array(g_h) @ Q)
         iterations += 1
-        theta = max(0.995, 1.0 - gh_max)
-        upper_room = [theta * (ubl[i] - xl[i]) for i in range(n)]
-        lower_room = [theta * (lbl[i] - xl[i]) for i in range(n)]
-        # Inner loop: shrink the radius until a step decreases the cost.
-        for _attempt in range(max_rejections):
-            s, s_h = _step_inside(_subproblem(eig, radius).tolist(), d, lower_room, upper_room)
-            s_arr = np.array(s_h)
-            predicted = -(sum(g_h[i] * s_h[i] for i in range(n)) + 0.5 * float(s_arr @ H @ s_arr))
-            if predicted_ftol > 0 and predicted < predicted_ftol * cost:
-                return NormalResult(x, cost, g, N, extra, radius, iterations, True, evaluations)
-            # Iterates stay as far inside as the start is put: the result, passed back in as the
-            # next warm start, is then used exactly as returned.
-            x_new = np.array([min(max(xl[i] + s[i], inner_lbl[i]), inner_ubl[i]) for i in range(n)])
-            cost_new, g_new, N_new, extra_new = fun(x_new)
-            evaluations += 1
-            actual = cost - cost_new
-            step_norm = sqrt(sum(v * v for v in s_h))
-            ratio = actual / predicted if predicted > 0 else -1.0
-            if ratio < 0.25:
-                radius = 0.25 * step_norm if step_norm > 0 else 0.25 * radius
-            elif ratio > 0.75 and step_norm >= 0.95 * radius:
-                radius *= 2.0
-            if actual > 0 and math.isfinite(cost_new):
-                break
-            if radius < 1e-12 * (1.0 + sqrt(sum(v * v for v in xl))):
-                return NormalResult(x, cost, g, N, extra, radius, iterations, True, evaluations)
-        else:
+        trial, radius, spent = _decreasing_step(fun, xl, cost, *model, g_h, d, gh_max, box, radius,
+                                                max_rejections, predicted_ftol)
+        evaluations += spent
+        if trial is None:
             return NormalResult(x, cost, g, N, extra, radius, iterations, True, evaluations)
         x_norm = sqrt(sum(v * v for v in xl))
-        x, g, N, extra = x_new, g_new, N_new, extra_new
-        small_cost = actual < ftol * cost
-        small_step = sqrt(sum(v * v for v in s)) < xtol * (xtol + x_norm)
+        x, (cost_new, g, N, extra) = trial.x, trial.evaluation
+        small_cost = trial.actual < ftol * cost
+        small_step = sqrt(sum(v * v for v in trial.step)) < xtol * (xtol + x_norm)
         cost = cost_new
         if small_cost or small_step:
             converged = True

@@ -8,6 +8,9 @@ saves, estimate-log flushes, and the bus reconnect with exponential backoff.
 
 Signals only set flags: SIGTERM/SIGINT stop cleanly (state written, `STOPPING=1`, exit 0),
 SIGHUP reloads the config (an invalid new config is reported in one line and the old one kept).
+
+`Daemon` is assembled from parts in their own modules: `daemon_bus` (the bus), `daemon_reload`
+(the state file, the estimate log, the reload) and `daemon_status` (the status line).
 """
 from __future__ import annotations
 
@@ -25,8 +28,11 @@ from typing import Any, Callable
 import can
 
 from .busio import open_bus
-from .config import Config, ConfigError
-from .daemon_bus import FIRST_BACKOFF_S, DaemonBus, StartupError
+from .config import Config
+from .daemon_bus import FIRST_BACKOFF_S, DaemonBus
+from .daemon_bus import StartupError  # noqa: F401 (re-exported: `cli.run` catches it from here)
+from .daemon_reload import DaemonReload
+from .daemon_status import DaemonStatus
 from .estimate_log import EstimateLog
 from .pipeline import Pipeline
 from .sdnotify import SdNotifier
@@ -101,7 +107,7 @@ class DaemonStats:
     error_classes: dict[int, int] = field(default_factory=dict)
 
 
-class Daemon(DaemonBus):
+class Daemon(DaemonBus, DaemonReload, DaemonStatus):
     """The live loop. `run()` blocks until `request_stop()` (or SIGTERM/SIGINT) and returns 0."""
 
     def __init__(
@@ -172,22 +178,6 @@ class Daemon(DaemonBus):
         period = pipeline.front_end.period_of(pipeline.trigger_message)
         self.tick_interval_s = max(0.005, min(period / 2.0, 0.05))
 
-    def _open_state(self) -> None:
-        path = self.config.daemon.state_file
-        self.state_file = StateFile(path) if path is not None else None
-        if self.state_file is not None:
-            self._state_loaded = self.state_file.load_into(self.pipeline.estimator)
-
-    def _open_estimate_log(self) -> EstimateLog | None:
-        out = self.config.output
-        if out.estimate_log is None:
-            return None
-        try:
-            return EstimateLog(out.estimate_log, out.estimate_log_max_bytes, out.estimate_log_backups,
-                               channel=self.config.can.channel)
-        except (OSError, ValueError) as exc:
-            raise StartupError(f"output.estimate_log: cannot open {out.estimate_log}: {exc}") from None
-
     def frame_now(self) -> float:
         """"Now" on the time base of the received frames (socket timestamps, or a log's)."""
         if self._last_rx_time is None:
@@ -197,106 +187,6 @@ class Daemon(DaemonBus):
             # stamped later than them would put the output out of order (log, listeners).
             return self._last_rx_time
         return self._last_rx_time + (self._mono() - self._last_rx_mono)
-
-    # ------------------------------------------------------------------------------ status
-    def status_text(self) -> str:
-        est = self.pipeline.last_estimate
-        name = est.status.name if est is not None else "WAITING"
-        mu = f"MuMax {est.mu_max:.3f}" if est is not None else "MuMax -"
-        reason = self.pipeline.not_valid_reason
-        parts = [f"{name} {mu}" + (f" ({reason})" if reason else ""), f"{self._fps:.0f} frames/s"]
-        if self.bus_down or self.bus is None:
-            parts.append("bus down, reconnecting")
-        if self.bus_off:
-            parts.append("bus-off")
-        st = self.stats
-        if st.flood_dropped:
-            parts.append(f"{st.flood_dropped} flood frames dropped")
-        if st.tx_dropped:
-            parts.append(f"{st.tx_dropped} tx dropped")
-        if self.pipeline.stats.error_frames:
-            parts.append(f"{self.pipeline.stats.error_frames} error frames")
-        return ", ".join(parts)
-
-    def _update_status(self, now: float) -> None:
-        fe = self.pipeline.front_end
-        if not self._period_warned and fe.period_mismatch():
-            self._period_warned = True
-            log.warning("%s arrives every %.1f ms but its DBC cycle time is %.1f ms: the derivative filter "
-                        "and the staleness limits are sized from the DBC; fix its GenMsgCycleTime",
-                        fe.trigger_message, 1e3 * (fe.measured_period_s or 0.0),
-                        1e3 * fe.declared_period_s)
-        dt = now - self._status_at
-        if dt > 0:
-            self._fps = (self.stats.rx_frames - self._status_rx) / dt
-        self._status_at = now
-        self._status_rx = self.stats.rx_frames
-        text = self.status_text()
-        if text != self._last_status_text:
-            self._last_status_text = text
-            self.notifier.status(text)
-        est = self.pipeline.last_estimate
-        name = est.status.name if est is not None else "WAITING"
-        if name != self._last_status_name:
-            self._last_status_name = name
-            log.info("status %s", text)
-
-    # ------------------------------------------------------------------------------ state
-    def save_state(self) -> None:
-        if self.state_file is not None:
-            self.state_file.save(self.pipeline.estimator.state(), self._clock())
-            self._updates_saved = self.pipeline.stats.updates
-
-    # ------------------------------------------------------------------------------ reload
-    def _reload(self) -> None:
-        self._reload_requested = False
-        self.stats.reloads += 1
-        self.notifier.reloading()
-        try:
-            new = self.overrides.apply(self._config_loader(self.config_path))
-            pipeline = Pipeline(new)
-        except (ConfigError, OSError, ValueError) as exc:
-            self.stats.reload_failures += 1
-            log.error("config reload failed, keeping the running config: %s", exc)
-            self.notifier.ready(self.status_text())
-            return
-        old = self.config
-        try:
-            pipeline.estimator.load_state(self.pipeline.estimator.state())
-        except (ValueError, TypeError, KeyError):
-            log.info("estimator changed with the reload: starting from its nominal prior")
-        bus_changed = (new.can.interface, new.can.channel, new.can.bitrate) != (
-            old.can.interface, old.can.channel, old.can.bitrate) or (
-            pipeline.input_codec.input_ids != self.pipeline.input_codec.input_ids)
-        log_changed = (new.output.estimate_log, new.output.estimate_log_max_bytes, new.output.estimate_log_backups) != (
-            old.output.estimate_log, old.output.estimate_log_max_bytes, old.output.estimate_log_backups)
-        self.save_state()
-        self.config = new
-        self.pipeline = pipeline
-        self._period_warned = False
-        self._set_rates()
-        self._updates_saved = 0
-        if new.daemon.state_file != old.daemon.state_file:
-            self.state_file = StateFile(new.daemon.state_file) if new.daemon.state_file is not None else None
-        if log_changed:
-            if self.estimate_log is not None:
-                self.estimate_log.close()
-            try:
-                self.estimate_log = self._open_estimate_log()
-            except StartupError as exc:
-                log.error("%s; estimate log disabled", exc)
-                self.estimate_log = None
-        if bus_changed:
-            self._close_bus()
-            self.bus_down = False
-            self._backoff = FIRST_BACKOFF_S
-            try:
-                self._open_bus(first=True)
-            except StartupError as exc:
-                log.error("%s; waiting for a usable config", exc)
-                self._next_open = math.inf
-        log.warning("config reloaded from %s", self.config_path or "the built-in default")
-        self.notifier.ready(self.status_text())
 
     # ------------------------------------------------------------------------------ main loop
     def run(self) -> int:

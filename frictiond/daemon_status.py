@@ -1,0 +1,54 @@
+"""The daemon's status reporting (`DaemonStatus`, a part of `daemon.Daemon`; its state is the
+daemon's): the one-line status systemd shows (sd_notify STATUS=), its frames/s, a log line when
+the estimate's status changes, and the warning for a trigger message off its DBC cycle time."""
+from __future__ import annotations
+
+import logging
+
+log = logging.getLogger("frictiond.daemon")
+
+
+class DaemonStatus:
+    """Status reporting of the live loop."""
+
+    def status_text(self) -> str:
+        est = self.pipeline.last_estimate
+        name = est.status.name if est is not None else "WAITING"
+        mu = f"MuMax {est.mu_max:.3f}" if est is not None else "MuMax -"
+        reason = self.pipeline.not_valid_reason
+        parts = [f"{name} {mu}" + (f" ({reason})" if reason else ""), f"{self._fps:.0f} frames/s"]
+        if self.bus_down or self.bus is None:
+            parts.append("bus down, reconnecting")
+        if self.bus_off:
+            parts.append("bus-off")
+        st = self.stats
+        if st.flood_dropped:
+            parts.append(f"{st.flood_dropped} flood frames dropped")
+        if st.tx_dropped:
+            parts.append(f"{st.tx_dropped} tx dropped")
+        if self.pipeline.stats.error_frames:
+            parts.append(f"{self.pipeline.stats.error_frames} error frames")
+        return ", ".join(parts)
+
+    def _update_status(self, now: float) -> None:
+        fe = self.pipeline.front_end
+        if not self._period_warned and fe.period_mismatch():
+            self._period_warned = True
+            log.warning("%s arrives every %.1f ms but its DBC cycle time is %.1f ms: the derivative filter "
+                        "and the staleness limits are sized from the DBC; fix its GenMsgCycleTime",
+                        fe.trigger_message, 1e3 * (fe.measured_period_s or 0.0),
+                        1e3 * fe.declared_period_s)
+        dt = now - self._status_at
+        if dt > 0:
+            self._fps = (self.stats.rx_frames - self._status_rx) / dt
+        self._status_at = now
+        self._status_rx = self.stats.rx_frames
+        text = self.status_text()
+        if text != self._last_status_text:
+            self._last_status_text = text
+            self.notifier.status(text)
+        est = self.pipeline.last_estimate
+        name = est.status.name if est is not None else "WAITING"
+        if name != self._last_status_name:
+            self._last_status_name = name
+            log.info("status %s", text)

@@ -156,7 +156,7 @@ class _Surfaces:
         if self._x_change is None and t >= self._change_s:
             self._x_change = x_travel
         if self._x_change is not None:
-            new = self.after_change(x_travel - self._x_change, self._wheelbase)
+            new = self.after_change(x_travel - self._x_change)
             if not np.array_equal(new, self.idx):
                 self.idx = new
                 self.tyre = self.tyre_for(new)
@@ -167,11 +167,11 @@ class _Surfaces:
             self._stacks[key] = stack([self._singles[self.names[i]] for i in key])
         return self._stacks[key]
 
-    def after_change(self, travelled_since_m: float, wheelbase: float) -> np.ndarray:
+    def after_change(self, travelled_since_m: float) -> np.ndarray:
         """The surfaces once the front axle has reached the new road, `travelled_since_m` ago:
         the rear axle reaches it one wheelbase further on."""
         return np.where(_AXLE_FRONT > 0, self.after,
-                        np.where(travelled_since_m >= wheelbase, self.after, self.before))
+                        np.where(travelled_since_m >= self._wheelbase, self.after, self.before))
 
 
 class _TraceRecorder:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import TextIO
+from typing import Any, TextIO
 
 from .busio import frame_to_message, message_to_frame, open_bus
 from .codec import OutputCodec, load_databases
@@ -22,6 +22,23 @@ class DemoResult:
     truth_mu_max: float
 
 
+@dataclass
+class _Listener:
+    """The demo's view of the estimate frames on the virtual channel: the newest one decoded."""
+
+    bus: Any
+    codec: OutputCodec
+    last: dict[str, Any] | None = None
+
+    def drain(self, timeout: float = 0.0) -> dict[str, Any] | None:
+        """Read every estimate frame waiting (each wait up to `timeout`); the newest decoded one."""
+        while (msg := self.bus.recv(timeout=timeout)) is not None:
+            decoded = self.codec.decode_output(message_to_frame(msg))
+            if decoded is not None:
+                self.last = decoded
+        return self.last
+
+
 def run_demo(
     config: Config,
     scenarios: list[str],
@@ -35,7 +52,7 @@ def run_demo(
     daemon_bus = open_bus("virtual", channel, pipeline.input_codec.input_ids, preserve_timestamps=True)
     vehicle_bus = open_bus("virtual", channel, None, preserve_timestamps=True)
     listener_bus = open_bus("virtual", channel, [pipeline.output_codec.estimate_id], preserve_timestamps=True)
-    output_codec = OutputCodec(load_databases([config.can.output_dbc], strict=True))
+    listener = _Listener(listener_bus, OutputCodec(load_databases([config.can.output_dbc], strict=True)))
     stop = threading.Event()
     loop = threading.Thread(target=serve, args=(daemon_bus, pipeline, stop), name="frictiond-loop", daemon=True)
     loop.start()
@@ -44,38 +61,13 @@ def run_demo(
         t0 = time.time()
         for k, name in enumerate(scenarios):
             frames, sim = simulate_frames(config, name, seed=seed + k)
-            truth = sim.truth
             if out:
                 print(f"\n== {name}: {sim.scenario.description}", file=out)
                 print(f"{'t [s]':>6s} {'v [m/s]':>7s} {'status':12s} {'MuMax':>6s} {'conf':>5s} {'truth':>6s}", file=out)
-            base = frames[0].time_s
-            start_wall = time.time()
-            last_print = -1.0
-            last_decoded = None
-            for frame in frames:
-                sim_t = frame.time_s - base
-                delay = start_wall + sim_t / pace - time.time()
-                if delay > 0:
-                    time.sleep(delay)
-                vehicle_bus.send(frame_to_message(frame._replace(time_s=t0 + (frame.time_s - base) + k * 100.0)))
-                while (msg := listener_bus.recv(timeout=0)) is not None:
-                    decoded = output_codec.decode_output(message_to_frame(msg))
-                    if decoded is not None:
-                        last_decoded = decoded
-                if last_decoded is not None and sim_t - last_print >= 0.25 and out:
-                    last_print = sim_t
-                    row = truth.at(sim_t)
-                    print(
-                        f"{sim_t:6.2f} {row['speed_mps']:7.2f} {last_decoded['EstimatorStatus']:12s} "
-                        f"{last_decoded['MuMax']:6.3f} {last_decoded['Confidence']:5.2f} {row['mu_max']:6.3f}",
-                        file=out,
-                        flush=True,
-                    )
+            _play(frames, sim.truth, vehicle_bus, listener, pace, t0 + k * 100.0, out)
             time.sleep(0.2)
-            while (msg := listener_bus.recv(timeout=0.05)) is not None:
-                decoded = output_codec.decode_output(message_to_frame(msg))
-                if decoded is not None:
-                    last_decoded = decoded
+            last_decoded = listener.drain(timeout=0.05)
+            truth = sim.truth
             end_truth = truth.at(truth.time_s[-1] if hasattr(truth, "time_s") else 1e9)
             if last_decoded is not None:
                 results.append(
@@ -88,3 +80,28 @@ def run_demo(
         for bus in (daemon_bus, vehicle_bus, listener_bus):
             bus.shutdown()
     return results
+
+
+def _play(frames: list[Any], truth: Any, vehicle_bus: Any, listener: _Listener, pace: float, t_start: float,
+          out: TextIO | None) -> None:
+    """Send one scenario's frames at `pace` × real time, stamped from `t_start`, printing the
+    newest estimate beside the truth every 0.25 s of the scenario."""
+    base = frames[0].time_s
+    start_wall = time.time()
+    last_print = -1.0
+    for frame in frames:
+        sim_t = frame.time_s - base
+        delay = start_wall + sim_t / pace - time.time()
+        if delay > 0:
+            time.sleep(delay)
+        vehicle_bus.send(frame_to_message(frame._replace(time_s=t_start + sim_t)))
+        last_decoded = listener.drain()
+        if last_decoded is not None and sim_t - last_print >= 0.25 and out:
+            last_print = sim_t
+            row = truth.at(sim_t)
+            print(
+                f"{sim_t:6.2f} {row['speed_mps']:7.2f} {last_decoded['EstimatorStatus']:12s} "
+                f"{last_decoded['MuMax']:6.3f} {last_decoded['Confidence']:5.2f} {row['mu_max']:6.3f}",
+                file=out,
+                flush=True,
+            )

@@ -168,31 +168,36 @@ def _estimate_big(snap: MonitorSnapshot, width: int, unicode: bool) -> list[Line
 
 
 def _body(snap: MonitorSnapshot, width: int, unicode: bool) -> list[Line]:
-    lines: list[Line] = []
-    # -- history
+    """The screen below the header: MuMax history, wheels, message rates, E2E and input counts."""
+    return (_history_lines(snap, width, unicode) + [[]] + _wheel_lines(snap, unicode) + [[]]
+            + _message_lines(snap, unicode) + [[]] + _count_lines(snap))
+
+
+def _history_lines(snap: MonitorSnapshot, width: int, unicode: bool) -> list[Line]:
     hist = snap.history
-    if hist:
-        lo, hi = min(hist), max(hist)
-        if hi - lo < 0.05:
-            mid = 0.5 * (hi + lo)
-            lo, hi = mid - 0.025, mid + 0.025
-        label = f"MuMax history {lo:.2f}..{hi:.2f} "
-        n = max(0, width - len(label) - 1)
-        spark = sparkline(hist, n, lo, hi, unicode)
-        statuses = snap.history_status[-len(spark):] if spark else []
-        line: Line = [(label, "dim")]
-        # one segment per run of equal status, coloured by that status
-        start = 0
-        for i in range(1, len(spark) + 1):
-            if i == len(spark) or statuses[i] != statuses[start]:
-                line.append((spark[start:i], STATUS_STYLE.get(statuses[start], "bad")))
-                start = i
-        lines.append(line)
-    else:
-        lines.append([("MuMax history (none yet)", "dim")])
-    lines.append([])
-    # -- wheels
-    lines.append([(f"{'wheel':<6s} {'Slip':>8s} {'MuUsed':>8s} {'MuMaxWheel':>11s} {'NormalForce':>12s}  e2e", "title")])
+    if not hist:
+        return [[("MuMax history (none yet)", "dim")]]
+    lo, hi = min(hist), max(hist)
+    if hi - lo < 0.05:
+        mid = 0.5 * (hi + lo)
+        lo, hi = mid - 0.025, mid + 0.025
+    label = f"MuMax history {lo:.2f}..{hi:.2f} "
+    n = max(0, width - len(label) - 1)
+    spark = sparkline(hist, n, lo, hi, unicode)
+    statuses = snap.history_status[-len(spark):] if spark else []
+    line: Line = [(label, "dim")]
+    # one segment per run of equal status, coloured by that status
+    start = 0
+    for i in range(1, len(spark) + 1):
+        if i == len(spark) or statuses[i] != statuses[start]:
+            line.append((spark[start:i], STATUS_STYLE.get(statuses[start], "bad")))
+            start = i
+    return [line]
+
+
+def _wheel_lines(snap: MonitorSnapshot, unicode: bool) -> list[Line]:
+    lines: list[Line] = [[(f"{'wheel':<6s} {'Slip':>8s} {'MuUsed':>8s} {'MuMaxWheel':>11s} {'NormalForce':>12s}  e2e",
+                           "title")]]
     for name, w in zip(WHEELS, snap.wheels):
         if w is None:
             lines.append([(f"{name:<6s} {'—' if unicode else '-':>8s}", "dim")])
@@ -201,40 +206,37 @@ def _body(snap: MonitorSnapshot, width: int, unicode: bool) -> list[Line]:
             (f"{name:<6s} {w.slip:8.4f} {w.mu_used:8.3f} {w.mu_max_wheel:11.4f} {w.normal_force:10.0f} N  ", "normal"),
             (w.e2e, "normal" if w.e2e == "ok" else "bad"),
         ])
-    lines.append([])
-    # -- inputs and outputs
+    return lines
+
+
+def _message_lines(snap: MonitorSnapshot, unicode: bool) -> list[Line]:
     rows = list(snap.inputs) + list(snap.outputs)
     name_w = max([len(r.name) + (2 if r.is_output else 0) for r in rows] + [7])
     name_w = min(name_w, 24)
-    lines.append([(f"{'message':<{name_w}s} {'ID':>5s} {'age':>9s} {'rate':>10s} {'expected':>9s} {'frames':>9s}",
-                   "title")])
-    for r in rows:
-        lines.append(_rate_row(r, name_w, unicode))
-    lines.append([])
-    # -- E2E and counts
+    lines: list[Line] = [[(f"{'message':<{name_w}s} {'ID':>5s} {'age':>9s} {'rate':>10s} {'expected':>9s} "
+                           f"{'frames':>9s}", "title")]]
+    return lines + [_rate_row(r, name_w, unicode) for r in rows]
+
+
+def _count_lines(snap: MonitorSnapshot) -> list[Line]:
     e = snap.e2e
     bad = e["crc_failures"] or e["counter_jumps"] or e["frames_lost"]
-    lines.append([
-        ("E2E ", "title"),
-        (f"ok {e['ok']}   CRC failures {e['crc_failures']}   counter jumps {e['counter_jumps']}   "
-         f"frames lost {e['frames_lost']}   repeated {e['repeated']}", "bad" if bad else "normal"),
-    ])
-    detail = "; ".join(f"{k} {v}" for k, v in sorted(snap.undecodable.items(), key=lambda kv: -kv[1])[:3])
-    lines.append([
-        (f"undecodable {snap.undecodable_total}", "bad" if snap.undecodable_total else "normal"),
-        (f" ({detail})" if detail else "", "normal"),
-        (f"   other frames {snap.other_frames}   error frames {snap.error_frames}",
-         "bad" if snap.error_frames else "normal"),
-    ])
+    undecodable = "; ".join(f"{k} {v}" for k, v in sorted(snap.undecodable.items(), key=lambda kv: -kv[1])[:3])
     rejected = snap.rejected or {}
-    detail = "; ".join(f"{k} {v}" for k, v in sorted(rejected.items(), key=lambda kv: -kv[1])[:4])
-    lines.append([
-        (f"rejected input {sum(rejected.values())}", "warn" if rejected else "normal"),
-        (f" ({detail})" if detail else "", "normal"),
-        (f"   suspect {snap.suspect_share:.1%} of the last second", "normal"),
-        (f"   not VALID: {snap.not_valid_reason}" if snap.not_valid_reason else "", "bad"),
-    ])
-    return lines
+    rejected_detail = "; ".join(f"{k} {v}" for k, v in sorted(rejected.items(), key=lambda kv: -kv[1])[:4])
+    return [
+        [("E2E ", "title"),
+         (f"ok {e['ok']}   CRC failures {e['crc_failures']}   counter jumps {e['counter_jumps']}   "
+          f"frames lost {e['frames_lost']}   repeated {e['repeated']}", "bad" if bad else "normal")],
+        [(f"undecodable {snap.undecodable_total}", "bad" if snap.undecodable_total else "normal"),
+         (f" ({undecodable})" if undecodable else "", "normal"),
+         (f"   other frames {snap.other_frames}   error frames {snap.error_frames}",
+          "bad" if snap.error_frames else "normal")],
+        [(f"rejected input {sum(rejected.values())}", "warn" if rejected else "normal"),
+         (f" ({rejected_detail})" if rejected_detail else "", "normal"),
+         (f"   suspect {snap.suspect_share:.1%} of the last second", "normal"),
+         (f"   not VALID: {snap.not_valid_reason}" if snap.not_valid_reason else "", "bad")],
+    ]
 
 
 # ---------------------------------------------------------------------------------------------

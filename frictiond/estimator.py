@@ -485,6 +485,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             o.speed_error_mps, o.speed_drift_mps2, o.speed_anchor_slip, o.excitation_window_s))
         self._wheel_shown_s = [-math.inf] * N_WHEELS
         self._shape_proximity = [0.0] * N_WHEELS
+        self._shape_verdict_s = [-math.inf] * N_WHEELS
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
@@ -521,6 +522,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._runaway = [_Runaway() for _ in range(N_WHEELS)]
         self._wheel_shown_s = [-math.inf] * N_WHEELS
         self._shape_proximity = [0.0] * N_WHEELS
+        self._shape_verdict_s = [-math.inf] * N_WHEELS
         self._innovation_score = 0.0
         self._front_innovation_score = 0.0
         self._radius = None

@@ -159,7 +159,8 @@ class PeakEvidence:
             (firm braking below the peak bends the data too: tyre curves bend well before their
             peak).
         Once shown, a wheel held past the fitted peak at its grip stays excited (ABS holding
-        an ice plateau at nearly constant slip, where the bending has no spread to work on).
+        an ice plateau at nearly constant slip, where the bending has no spread to work on)
+        while the samples that showed it are in the window.
         No excitation at all while one wheel's data contradict the fitted curve (μ still rising
         at slips well past that wheel's fitted peak).
         """
@@ -252,7 +253,8 @@ class PeakEvidence:
             # ice): the shape of the curve near its peak is not observed ...
             shown = self._shape_proximity[wheel]
             if (peak_seen and shown >= o.excitation_slip_ratio and lam_hi >= o.excitation_min_slip
-                    and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star):
+                    and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star
+                    and self._last_sample_s - self._shape_verdict_s[wheel] <= o.window_s):
                 # ... unless this stop's data have shown the peak already, this wheel's own last
                 # slips with spread said so, and the wheel now stays past it, using the grip the
                 # fit says is there (ABS holding a wheel on an ice plateau): the peak is still
@@ -261,11 +263,15 @@ class PeakEvidence:
                 # to: a slip target short of the peak leaves nothing to locate it.)
                 # It carries no more than that verdict showed: the slip is held, and only the
                 # fit's peak has moved under it since (a peak moved below a held slip is the
-                # fit talking itself into excitation).
+                # fit talking itself into excitation). And only while the samples behind that
+                # verdict are in the window: then the fit has the held slip alone, whose μ bounds
+                # μ_max from below and says nothing of the curve beyond it (a slip target short of
+                # a rising peak and one on a plateau look the same).
                 return ("past the peak ({:.2f})", lam_lo / lam_star), shown, False
             return "no slip spread", 0.0, True
         verdict = self._shape_verdict(wheel, stats, mu_star, lam_star, fit_at_hi, capped)
         self._shape_proximity[wheel] = verdict[1]
+        self._shape_verdict_s[wheel] = self._last_sample_s
         return verdict
 
     def _shape_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float,

@@ -118,6 +118,7 @@ class WindowFit:
             # (The peaks the wheels showed were the old road's.)
             self._wheel_shown_s = [-math.inf] * N_WHEELS
             self._shape_proximity = [0.0] * N_WHEELS
+            self._shape_verdict_s = [-math.inf] * N_WHEELS
 
     def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
         """Unweighted Jacobian rows and model − measurement of window samples [lo, hi) at x.

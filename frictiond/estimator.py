@@ -58,7 +58,8 @@ from .axle_balance import AxleBalance
 from .estimate_confidence import EstimateConfidence
 from .estimate_report import EstimateReport
 from .fit_parameters import FitParameters
-from .peak_evidence import N_WHEELS, PeakEvidence, _Runaway
+from .peak_evidence import N_WHEELS, PeakEvidence
+from .runaway import _Runaway
 from .window_fit import WindowFit
 
 SHARED = ("sigma0", "v_s", "sigma2")

@@ -10,14 +10,13 @@ beside it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
+from .runaway import RunawayEvidence
 from .samples import WHEELS
 from .tyre_model import MAX_MODEL_SLIP, braking_mu_and_partials_few
-from .vehicle import GRAVITY_MPS2
 
 N_WHEELS = len(WHEELS)
 # A wheel verdict's proximity when the wheel's data contradict the fitted curve (`_wheel_verdict`).
@@ -94,15 +93,7 @@ def _top_elasticity_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, t
     slope = float(dl @ (us - u_mean)) / max(float(dl @ dl), 1e-12)
     return slope * l_mean / max(u_mean, 1e-6)
 
-@dataclass(slots=True)
-class _Runaway:
-    """A wheel's latest runaway into slip, until confirmed or `runaway_confirm_s` old."""
-    since_s: float = -math.inf
-    reached: float = 0.0              # the slip it had reached when seen
-    confirmed: bool = False
-
-
-class PeakEvidence:
+class PeakEvidence(RunawayEvidence):
     """The excitation: per wheel a verdict on whether its newest data show the peak, and the
     stop-long evidence behind it (runaways, peaks shown, the wheels' last verdicts on spread slips)."""
 
@@ -210,29 +201,13 @@ class PeakEvidence:
         past the peak seen before), True where these data show the peak themselves.
         """
         o = self.options
-        n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate, s2, s3, s4, y1, y2 = stats
+        n, _, _, lam_lo, lam_hi, mu_hi, runaway_rate = stats[:7]
         if n < self._min_wheel_samples:
             return "few samples", 0.0, True
         if not peak_seen and speed < o.peak_evidence_min_speed:
             return "too slow to show a peak", 0.0, True
-        if not peak_seen and not abs_working:
-            # Over its peak a tyre gives no more force as the brake torque rises: the wheel
-            # runs away into slip (ABS exists to catch this). Steady braking, however bent its
-            # μ–slip data look (a LuGre-like tyre bends well before the peak; the driver's
-            # release bends them more), moves the slip slowly.
-            # Growth over ~50 ms (`_runaway_lag` samples): beyond the slip noise, within an ABS
-            # cycle; and the force no longer following it: Δμ/μ ≤ elasticity·Δλ/λ. The pedal
-            # applied briskly moves the slip as fast in the linear region (0.3 /s at 65 % of
-            # the grip on wet), but there μ rises in proportion.
-            # Near-zero-slip peaks (polished ice) run away at a rate relative to their slip.
-            # And in sliding speed, not only in slip: at walking pace the speed estimate's noise,
-            # divided by a small speed, makes slip "grow" at rates a runaway shows at speed. Past
-            # its peak a wheel decelerates faster than the car by (T_brake − R·F_peak)·R/J; with
-            # F_z·R²/J ≈ 25 g per unit of μ on cars, 1.5 μ·g is a brake torque 6 % past the peak.
-            needed = max(min(o.excitation_slip_rate, o.excitation_relative_slip_rate * lam_hi),
-                         o.excitation_runaway_decel * GRAVITY_MPS2 * max(mu_hi, 0.0) / max(speed, 1.0))
-            if not self._runaway_confirmed(wheel, runaway_rate >= needed, lam_hi):
-                return "slip not running away", 0.0, True
+        if not peak_seen and not abs_working and not self._running_away(wheel, runaway_rate, lam_hi, mu_hi, speed):
+            return "slip not running away", 0.0, True
         if lam_hi * speed < o.excitation_min_sliding_mps:
             # Slip is a speed difference over the speed: at walking pace a few quanta of the
             # wheel-speed signals (0.01–0.06 km/h each) and the speed estimate's error make
@@ -249,30 +224,36 @@ class PeakEvidence:
         spread = (lam_hi >= o.excitation_min_slip
                   and (lam_hi - lam_lo) >= needed_spread * lam_hi + 2.0 * speed_error_spread)
         if not spread:
-            # No spread of slip, or slips too small for any road's peak (≥ 1.5–3 % even on
-            # ice): the shape of the curve near its peak is not observed ...
-            shown = self._shape_proximity[wheel]
-            if (peak_seen and shown >= o.excitation_slip_ratio and lam_hi >= o.excitation_min_slip
-                    and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star
-                    and self._last_sample_s - self._shape_verdict_s[wheel] <= o.window_s):
-                # ... unless this stop's data have shown the peak already, this wheel's own last
-                # slips with spread said so, and the wheel now stays past it, using the grip the
-                # fit says is there (ABS holding a wheel on an ice plateau): the peak is still
-                # being used, not left behind. (Where the wheel's slips last spread its data were
-                # still rising, the fit's peak under a held slip is where the fit put it, free
-                # to: a slip target short of the peak leaves nothing to locate it.)
-                # It carries no more than that verdict showed: the slip is held, and only the
-                # fit's peak has moved under it since (a peak moved below a held slip is the
-                # fit talking itself into excitation). And only while the samples behind that
-                # verdict are in the window: then the fit has the held slip alone, whose μ bounds
-                # μ_max from below and says nothing of the curve beyond it (a slip target short of
-                # a rising peak and one on a plateau look the same).
-                return ("past the peak ({:.2f})", lam_lo / lam_star), shown, False
-            return "no slip spread", 0.0, True
+            return self._held_slip_verdict(wheel, lam_lo, lam_hi, mu_hi, mu_star, lam_star, peak_seen)
         verdict = self._shape_verdict(wheel, stats, mu_star, lam_star, fit_at_hi, capped)
         self._shape_proximity[wheel] = verdict[1]
         self._shape_verdict_s[wheel] = self._last_sample_s
         return verdict
+
+    def _held_slip_verdict(self, wheel: int, lam_lo: float, lam_hi: float, mu_hi: float, mu_star: float,
+                           lam_star: float, peak_seen: bool) -> tuple[Any, float, bool]:
+        """`_wheel_verdict` for a wheel whose slips do not spread, or are too small for any road's
+        peak (≥ 1.5–3 % even on ice): the shape of the curve near its peak is not observed ...
+        """
+        o = self.options
+        shown = self._shape_proximity[wheel]
+        if (peak_seen and shown >= o.excitation_slip_ratio and lam_hi >= o.excitation_min_slip
+                and lam_lo >= lam_star and mu_hi >= o.min_utilisation * mu_star
+                and self._last_sample_s - self._shape_verdict_s[wheel] <= o.window_s):
+            # ... unless this stop's data have shown the peak already, this wheel's own last
+            # slips with spread said so, and the wheel now stays past it, using the grip the
+            # fit says is there (ABS holding a wheel on an ice plateau): the peak is still
+            # being used, not left behind. (Where the wheel's slips last spread its data were
+            # still rising, the fit's peak under a held slip is where the fit put it, free
+            # to: a slip target short of the peak leaves nothing to locate it.)
+            # It carries no more than that verdict showed: the slip is held, and only the
+            # fit's peak has moved under it since (a peak moved below a held slip is the
+            # fit talking itself into excitation). And only while the samples behind that
+            # verdict are in the window: then the fit has the held slip alone, whose μ bounds
+            # μ_max from below and says nothing of the curve beyond it (a slip target short of
+            # a rising peak and one on a plateau look the same).
+            return ("past the peak ({:.2f})", lam_lo / lam_star), shown, False
+        return "no slip spread", 0.0, True
 
     def _shape_verdict(self, wheel: int, stats: tuple[float, ...], mu_star: float, lam_star: float,
                        fit_at_hi: float, capped: bool) -> tuple[Any, float, bool]:
@@ -323,35 +304,6 @@ class PeakEvidence:
         if lam_star >= 0.9 * MAX_MODEL_SLIP and fit_ratio < o.excitation_fit_ratio:  # (uncapped)
             return "no peak", 0.0, True   # no peak short of lock, and the data far below the fitted maximum
         return ("proximity {:.2f}", proximity), proximity, True
-
-    def _runaway_confirmed(self, wheel: int, running_away: bool, lam_hi: float) -> bool:
-        """Whether the wheel's runaway is a real one (`_follow_runaways`). A slip that grows
-        fast for a moment and then stays is the linear region's transient: a tyre with
-        relaxation lags the slip as the pedal goes down, and its force seems not to follow."""
-        o = self.options
-        state = self._runaway[wheel]
-        if self._last_sample_s - state.since_s <= o.runaway_confirm_s:
-            return state.confirmed
-        if running_away:
-            self._runaway[wheel] = _Runaway(self._last_sample_s, lam_hi)
-        return False
-
-    def _follow_runaways(self, now_s: float, slips: Sequence[float]) -> None:
-        """Per sample, each wheel with an unconfirmed runaway. Past its peak, with the brake
-        torque above what the road can take, the slip runs on towards lock-up until the torque
-        falls: running on to twice the slip reached (and by `runaway_confirm_slip`) confirms
-        it. Nothing else does: a slip that falls back while the force holds is what a relaxing
-        tyre shows after the pedal's application (its force catching up with a slip that
-        overshot), as much as a wheel released from past its peak; an ABS release is evidence
-        of its own (`abs_activity`)."""
-        o = self.options
-        for i in range(N_WHEELS):
-            state = self._runaway[i]
-            if state.confirmed or now_s - state.since_s > o.runaway_confirm_s:
-                continue
-            slip = slips[i]
-            if slip >= max(2.0 * state.reached, state.reached + o.runaway_confirm_slip):
-                state.confirmed = True
 
     def _top_elasticity(self, wheel: int) -> float | None:
         """The wheel's local elasticity (dμ/dλ)·λ̄/μ̄ over the top half of its slips of the newest

@@ -14,11 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from .runaway import RunawayEvidence
-from .samples import WHEELS
+from .runaway import N_WHEELS, RunawayEvidence
 from .tyre_model import MAX_MODEL_SLIP, braking_mu_and_partials_few
 
-N_WHEELS = len(WHEELS)
 # A wheel verdict's proximity when the wheel's data contradict the fitted curve (`_wheel_verdict`).
 CONTRADICTED = -1.0
 

@@ -292,7 +292,7 @@ def test_long_stop_with_many_faults(default_config):
         assert flagged_share(estimates, t0, t1) >= 0.9, (t0, t1)
     tail = [e.status for e in estimates if e.time_s < 0 and unshift(e.time_s) > 6.5]
     # (a third of it: after the clock step the window restarts, and its confidence regains
-    # VALID's 0.65 a second later)
+    # VALID's threshold a second later)
     assert tail and tail.count(Status.VALID) > 0.25 * len(tail)
 
 

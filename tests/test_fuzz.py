@@ -36,7 +36,7 @@ def truth_of(sim):
 def recovered(outputs) -> bool:
     """Good data back, the estimator is too. `outputs`: (status, MuMax, the truth's μ_max) after
     the damage. VALID again; or, where the stop ends before the restarted fit's confidence regains
-    VALID's 0.65 (a wheel's speeds lost for 0.5 s mid-stop: 0.53 two seconds later), the last
+    VALID's threshold (a wheel's speeds lost for 0.5 s mid-stop: short of it two seconds later), the last
     outputs CONVERGING within 10 % of the truth, never held in FAULT or INPUT_STALE."""
     if any(status == Status.VALID for status, _, _ in outputs):
         return True

@@ -115,7 +115,7 @@ def test_master_cylinder_example():
     frames, sim = simulate_frames(config, "dry", seed=4)
     _, estimates = estimates_of(config, frames)
     report = evaluate(estimates, sim.truth.rows())
-    # (78 VALID outputs, 35 % of the span, from confidence 0.65: the master cylinder's pressure
+    # (78 VALID outputs, 35 % of the span, from VALID's threshold: the master cylinder's pressure
     # does not show the ABS's modulation, and the fit's spread stays wider)
     assert report.false_valid_count == 0 and report.valid_count > 50 and report.mae < 0.06, report
 

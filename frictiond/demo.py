@@ -29,14 +29,28 @@ class _Listener:
     bus: Any
     codec: OutputCodec
     last: dict[str, Any] | None = None
+    last_time_s: float = float("nan")   # the newest estimate's input time (the frame's timestamp)
+
+    def read_one(self, timeout: float = 0.0) -> bool:
+        """Read one frame (waiting up to `timeout`); False if none came."""
+        msg = self.bus.recv(timeout=timeout)
+        if msg is None:
+            return False
+        decoded = self.codec.decode_output(message_to_frame(msg))
+        if decoded is not None:
+            self.last, self.last_time_s = decoded, msg.timestamp
+        return True
 
     def drain(self, timeout: float = 0.0) -> dict[str, Any] | None:
         """Read every estimate frame waiting (each wait up to `timeout`); the newest decoded one."""
-        while (msg := self.bus.recv(timeout=timeout)) is not None:
-            decoded = self.codec.decode_output(message_to_frame(msg))
-            if decoded is not None:
-                self.last = decoded
+        while self.read_one(timeout):
+            pass
         return self.last
+
+    def forget(self) -> None:
+        """Drop what was read so far: a new scenario's rows show only its own estimates."""
+        self.drain()
+        self.last, self.last_time_s = None, float("nan")
 
 
 def run_demo(
@@ -64,6 +78,7 @@ def run_demo(
             if out:
                 print(f"\n== {name}: {sim.scenario.description}", file=out)
                 print(f"{'t [s]':>6s} {'v [m/s]':>7s} {'status':12s} {'MuMax':>6s} {'conf':>5s} {'truth':>6s}", file=out)
+            listener.forget()
             _play(frames, sim.truth, vehicle_bus, listener, pace, t0 + k * 100.0, out)
             time.sleep(0.2)
             last_decoded = listener.drain(timeout=0.05)
@@ -85,7 +100,9 @@ def run_demo(
 def _play(frames: list[Any], truth: Any, vehicle_bus: Any, listener: _Listener, pace: float, t_start: float,
           out: TextIO | None) -> None:
     """Send one scenario's frames at `pace` × real time, stamped from `t_start`, printing the
-    newest estimate beside the truth every 0.25 s of the scenario."""
+    newest estimate beside the truth at that estimate's own time, every 0.25 s of the scenario
+    (the daemon may be behind the frames sent: the truth at the newest frame sent is not what
+    the estimate had seen), and on until the daemon has answered the last frame."""
     base = frames[0].time_s
     start_wall = time.time()
     last_print = -1.0
@@ -95,13 +112,19 @@ def _play(frames: list[Any], truth: Any, vehicle_bus: Any, listener: _Listener, 
         if delay > 0:
             time.sleep(delay)
         vehicle_bus.send(frame_to_message(frame._replace(time_s=t_start + sim_t)))
-        last_decoded = listener.drain()
-        if last_decoded is not None and sim_t - last_print >= 0.25 and out:
-            last_print = sim_t
-            row = truth.at(sim_t)
-            print(
-                f"{sim_t:6.2f} {row['speed_mps']:7.2f} {last_decoded['EstimatorStatus']:12s} "
-                f"{last_decoded['MuMax']:6.3f} {last_decoded['Confidence']:5.2f} {row['mu_max']:6.3f}",
-                file=out,
-                flush=True,
-            )
+        listener.drain()
+        last_print = _show(listener, truth, t_start, last_print, out)
+    while listener.read_one(timeout=0.1):
+        last_print = _show(listener, truth, t_start, last_print, out)
+
+
+def _show(listener: _Listener, truth: Any, t_start: float, last_print: float, out: TextIO | None) -> float:
+    """Print the newest estimate if 0.25 s of the scenario have passed since the last one printed;
+    the time of the last one printed."""
+    estimate_t = listener.last_time_s - t_start
+    if listener.last is None or out is None or not estimate_t - last_print >= 0.25:
+        return last_print
+    row, decoded = truth.at(estimate_t), listener.last
+    print(f"{estimate_t:6.2f} {row['speed_mps']:7.2f} {decoded['EstimatorStatus']:12s} "
+          f"{decoded['MuMax']:6.3f} {decoded['Confidence']:5.2f} {row['mu_max']:6.3f}", file=out, flush=True)
+    return estimate_t

@@ -59,7 +59,6 @@ from .estimate_confidence import EstimateConfidence
 from .estimate_report import EstimateReport
 from .fit_parameters import FitParameters
 from .peak_evidence import N_WHEELS, PeakEvidence
-from .runaway import _Runaway
 from .window_fit import WindowFit
 
 SHARED = ("sigma0", "v_s", "sigma2")
@@ -489,10 +488,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._abs_seen_s = [-math.inf] * N_WHEELS
         self._speed_error = SpeedErrorBound(SpeedErrorOptions(
             o.speed_error_mps, o.speed_drift_mps2, o.speed_anchor_slip, o.excitation_window_s))
-        self._wheel_shown_s = [-math.inf] * N_WHEELS
-        self._shape_proximity = [0.0] * N_WHEELS
-        self._shape_verdict_s = [-math.inf] * N_WHEELS
-        self._runaway = [_Runaway() for _ in range(N_WHEELS)]
+        self._forget_shown_peaks()
+        self._forget_runaways()
         self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
         self._measured_peaks = [0.0] * N_WHEELS
         self._band_ratio = 0.0
@@ -525,10 +522,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._body_mu.clear()
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
-        self._runaway = [_Runaway() for _ in range(N_WHEELS)]
-        self._wheel_shown_s = [-math.inf] * N_WHEELS
-        self._shape_proximity = [0.0] * N_WHEELS
-        self._shape_verdict_s = [-math.inf] * N_WHEELS
+        self._forget_runaways()
+        self._forget_shown_peaks()
         self._innovation_score = 0.0
         self._front_innovation_score = 0.0
         self._radius = None

@@ -95,6 +95,13 @@ class PeakEvidence(RunawayEvidence):
     """The excitation: per wheel a verdict on whether its newest data show the peak, and the
     stop-long evidence behind it (runaways, peaks shown, the wheels' last verdicts on spread slips)."""
 
+    def _forget_shown_peaks(self) -> None:
+        """Forget the peaks the wheels showed and each wheel's last verdict on spread slips (and
+        when it was given): a new stop, or a new road, has shown nothing yet."""
+        self._wheel_shown_s = [-math.inf] * N_WHEELS
+        self._shape_proximity = [0.0] * N_WHEELS
+        self._shape_verdict_s = [-math.inf] * N_WHEELS
+
     def _slip_range(self, weights: np.ndarray | None) -> tuple[list[float], list[float]]:
         """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
         without data gets (0, ∞): no bound on either side."""

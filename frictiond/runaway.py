@@ -26,8 +26,12 @@ class _Runaway:
 
 
 class RunawayEvidence:
-    """Each wheel's latest runaway (`_runaway`, a list of `_Runaway` the estimator resets per
-    stop), followed per sample and confirmed when its slip runs on."""
+    """Each wheel's latest runaway (`_runaway`, a list of `_Runaway`, forgotten per stop),
+    followed per sample and confirmed when its slip runs on."""
+
+    def _forget_runaways(self) -> None:
+        """No wheel has run away yet (a new stop)."""
+        self._runaway = [_Runaway() for _ in range(N_WHEELS)]
 
     def _running_away(self, wheel: int, runaway_rate: float, lam_hi: float, mu_hi: float, speed: float) -> bool:
         """Whether the wheel ran away into slip, confirmed (`_runaway_confirmed`): a stop's first

@@ -115,10 +115,7 @@ class WindowFit:
             self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
             self._measured_peaks = [0.0] * N_WHEELS
             self._band_ratio = 0.0
-            # (The peaks the wheels showed were the old road's.)
-            self._wheel_shown_s = [-math.inf] * N_WHEELS
-            self._shape_proximity = [0.0] * N_WHEELS
-            self._shape_verdict_s = [-math.inf] * N_WHEELS
+            self._forget_shown_peaks()   # (the peaks the wheels showed were the old road's)
 
     def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
         """Unweighted Jacobian rows and model − measurement of window samples [lo, hi) at x.

@@ -80,8 +80,7 @@ def run_demo(
                 print(f"{'t [s]':>6s} {'v [m/s]':>7s} {'status':12s} {'MuMax':>6s} {'conf':>5s} {'truth':>6s}", file=out)
             listener.forget()
             _play(frames, sim.truth, vehicle_bus, listener, pace, t0 + k * 100.0, out)
-            time.sleep(0.2)
-            last_decoded = listener.drain(timeout=0.05)
+            last_decoded = listener.drain(timeout=0.05)   # (`_play` waited for the daemon's last answer)
             truth = sim.truth
             end_truth = truth.at(truth.time_s[-1] if hasattr(truth, "time_s") else 1e9)
             if last_decoded is not None:

@@ -15,10 +15,8 @@ import math
 from dataclasses import dataclass, fields
 from typing import Any
 
-from .samples import FrictionEstimate, PhysicalSample, Status
+from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
 from .vehicle import VehicleParams
-
-N_WHEELS = 4
 
 
 @dataclass(frozen=True, slots=True)

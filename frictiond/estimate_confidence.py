@@ -13,9 +13,7 @@ from typing import Sequence
 import numpy as np
 
 from . import input_quality, not_valid
-from .samples import LEFT_WHEELS, RIGHT_WHEELS, WHEELS
-
-N_WHEELS = len(WHEELS)
+from .samples import LEFT_WHEELS, N_WHEELS, RIGHT_WHEELS
 # Each wheel's partner in its track: the other axle's wheel on the same side.
 _IN_TRACK = {a: b for side in (LEFT_WHEELS, RIGHT_WHEELS) for a, b in (side, side[::-1])}
 # Bands of slip, as multiples of a wheel's fitted peak slip, in which `_excess_over_fit` averages

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from . import not_valid
-from .peak_evidence import N_WHEELS
+from .samples import N_WHEELS
 from .samples import FrictionEstimate, Status
 from .tyre_model import LugreParams, braking_mu_and_partials_few, peaks
 

@@ -50,7 +50,7 @@ try:
 except ImportError:  # pragma: no cover - depends on the install
     compiled_fit = None
 from . import not_valid
-from .samples import FrictionEstimate, PhysicalSample, Status
+from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
 from .speed_error import SpeedErrorBound, SpeedErrorOptions
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta
 from .vehicle import VehicleParams
@@ -58,7 +58,7 @@ from .axle_balance import AxleBalance
 from .estimate_confidence import EstimateConfidence
 from .estimate_report import EstimateReport
 from .fit_parameters import FitParameters
-from .peak_evidence import N_WHEELS, PeakEvidence
+from .peak_evidence import PeakEvidence
 from .window_fit import WindowFit
 
 SHARED = ("sigma0", "v_s", "sigma2")

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .peak_evidence import N_WHEELS
+from .samples import N_WHEELS
 from .tyre_model import LugreParams
 
 

@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from .runaway import N_WHEELS, RunawayEvidence
+from .runaway import RunawayEvidence
+from .samples import N_WHEELS
 from .tyre_model import MAX_MODEL_SLIP, braking_mu_and_partials_few
 
 # A wheel verdict's proximity when the wheel's data contradict the fitted curve (`_wheel_verdict`).

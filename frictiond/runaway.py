@@ -11,10 +11,8 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
-from .samples import WHEELS
+from .samples import N_WHEELS
 from .vehicle import GRAVITY_MPS2
-
-N_WHEELS = len(WHEELS)
 
 
 @dataclass(slots=True)

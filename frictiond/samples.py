@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 WHEELS: tuple[str, str, str, str] = ("FL", "FR", "RL", "RR")
+N_WHEELS = len(WHEELS)
 FRONT_WHEELS = (0, 1)
 REAR_WHEELS = (2, 3)
 LEFT_WHEELS = (0, 2)

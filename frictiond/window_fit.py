@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from . import trust_region
-from .peak_evidence import N_WHEELS
+from .samples import N_WHEELS
 from .samples import FrictionEstimate
 from .tyre_model import _SMALL_Z, braking_mu_and_partials
 

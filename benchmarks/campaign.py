@@ -1,8 +1,8 @@
 """Randomised braking campaign (issue 21): both estimators over random stops, against targets.
 
     .venv/bin/python benchmarks/campaign.py [--stops 1000] [--set held-out|dev|both] [--workers N]
-        [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--save FILE.json|.parquet] [--worst 15]
-    .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--write-log DIR]
+        [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--clean-sensors] [--save FILE.json|.parquet] [--worst 15]
+    .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--clean-sensors] [--write-log DIR]
 
 Each stop is drawn from its seed (`frictiond.campaign.draw`, ranges in its docstring): a car,
 tyres (Burckhardt or Magic Formula, never the estimator's LuGre), an ABS family, sensors and a
@@ -10,6 +10,9 @@ manoeuvre; integrated at 1 kHz, put on the bus through the car's own DBC, and re
 the real pipeline once with `lugre-tr` and once with `burckhardt-rls` (the baseline). Stops
 run in chunks on the embedded local Dask cluster (`frictiond.fleet.cluster.open_executor`).
 Development seeds are 0…N−1, held-out seeds 1,000,000…: tune on dev, report held-out.
+`--clean-sensors` runs the same stops with their sensors' imperfections taken off (no noise,
+jitter, loss, offsets or pressure lag; `draw.clean`): another simulator's signals may be that
+clean, and what the noise kept from VALID is then judged too.
 Printed: the issue's targets with PASS/FAIL per estimator, the comparison, a table per family,
 distributions, and the worst stops each with the command that reproduces it.
 """
@@ -29,8 +32,8 @@ from frictiond.campaign.score import score_stop
 from frictiond.campaign.simulate import simulate_stop
 
 
-def reproduce(seed: int, family: str | None, directory: str | None) -> int:
-    spec = draw_stop(seed, family)
+def reproduce(seed: int, family: str | None, directory: str | None, clean_sensors: bool = False) -> int:
+    spec = draw_stop(seed, family, clean_sensors)
     stop = simulate_stop(spec)
     row = score_stop(stop)
     print(f"seed {seed}: {spec.family}, surfaces {spec.surface_labels}, {spec.speed0_mps * 3.6:.0f} km/h, "
@@ -65,6 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scheduler", default=None, help="an existing Dask scheduler (tcp://HOST:8786)")
     parser.add_argument("--chunk", type=int, default=8, help="stops per Dask task")
     parser.add_argument("--family", default=None, help="force ABS[/TYRE[/MANOEUVRE]] (prefixes, * for any)")
+    parser.add_argument("--clean-sensors", action="store_true", help="the same stops without noise, jitter, "
+                        "frame loss, offsets or pressure lag")
     parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
     parser.add_argument("--worst", type=int, default=15)
     parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
@@ -72,25 +77,28 @@ def main(argv: list[str] | None = None) -> int:
                         "configs, truth CSV")
     args = parser.parse_args(argv)
     if args.reproduce is not None:
-        return reproduce(args.reproduce, args.family, args.write_log)
+        return reproduce(args.reproduce, args.family, args.write_log, args.clean_sensors)
     sets = ("dev", "held-out") if args.which == "both" else (args.which,)
     all_rows = []
     for which in sets:
         seeds = seeds_for(which, args.stops)
         started = time.perf_counter()
         rows = run_campaign(seeds, workers=args.workers, chunk=args.chunk, family=args.family,
-                            scheduler=args.scheduler, progress=progress_printer(which, started))
+                            scheduler=args.scheduler, progress=progress_printer(which, started),
+                            clean_sensors=args.clean_sensors)
         wall = time.perf_counter() - started
         cpu = sum(r.get("sim_cpu_s", 0.0) + r.get("lugre_cpu_s", 0.0) + r.get("rls_cpu_s", 0.0) for r in rows)
         print(f"\n##### {which} seeds {seeds[0]}…{seeds[-1]}: {len(rows)} stops in {wall:.0f} s wall "
               f"({args.workers if args.workers is not None else os.cpu_count()} workers; CPU per stop "
               f"{cpu / max(len(rows), 1):.2f} s: simulation + both estimators)\n")
-        print(full_report(rows, f"{which} seeds", args.worst, args.family))
+        title = f"{which} seeds" + (", clean sensors" if args.clean_sensors else "")
+        print(full_report(rows, title, args.worst, args.family, args.clean_sensors))
         for r in rows:
             r["set"] = which
         all_rows.extend(rows)
     if args.save:
-        save_rows(all_rows, args.save, {"stops": args.stops, "sets": list(sets), "family": args.family})
+        save_rows(all_rows, args.save, {"stops": args.stops, "sets": list(sets), "family": args.family,
+                                        "clean_sensors": args.clean_sensors})
         print(f"\nsaved {len(all_rows)} rows to {args.save}")
     return 0
 

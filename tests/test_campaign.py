@@ -13,7 +13,7 @@ import pytest
 from frictiond.campaign import draw as draw_mod
 from frictiond.campaign.abs_control import ABS_FAMILIES
 from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, draw_stop, seeds_for
-from frictiond.campaign.report import format_families, format_not_valid, full_report, target_rows
+from frictiond.campaign.report import format_families, format_not_valid, full_report, reproduce_command, target_rows
 from frictiond.campaign.run import load_rows, run_campaign, save_rows
 from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, WHEEL_MESSAGE
 from frictiond.campaign.simulate import simulate_stop
@@ -290,3 +290,37 @@ def test_normal_abs_stops_give_no_fault(seed):
     stop = simulate_stop(draw_stop(seed))
     _pipeline, estimates = estimates_of(stop.config("lugre-tr"), stop.frames)
     assert not [e.time_s for e in estimates if e.status == Status.FAULT]
+
+
+def test_clean_sensors_are_the_same_stop_without_the_sensors_imperfections():
+    for seed in (7, 1_000_005):
+        noisy, clean = draw_stop(seed), draw_stop(seed, clean_sensors=True)
+        assert dataclasses.replace(noisy, sensors=clean.sensors) == clean   # car, tyres, ABS, drive the same
+        s, n = clean.sensors, noisy.sensors
+        assert (s.wheel_noise_kmh, s.jitter_s, s.drop_rate, s.accel_offset_mps2, s.accel_lat_offset_mps2,
+                s.accel_noise_mps2, s.pressure_lag_s, s.pressure_offset_bar, s.pressure_noise_bar) == (0.0,) * 9
+        assert s.wheel_resolution_kmh == 0.01
+        assert (s.wheel_hz, s.accel_hz, s.pressure_hz, s.master_only, s.reference_speed, s.abs_flags) == (
+            n.wheel_hz, n.accel_hz, n.pressure_hz, n.master_only, n.reference_speed, n.abs_flags)
+    # On the bus: the wheel-speed frames evenly spaced (no jitter, none lost); the drawn
+    # sensors jitter theirs.
+    def wheel_frame_gap_spread(spec):
+        stop = simulate_stop(spec)
+        gaps = np.diff([f.time_s for f in stop.frames if f.can_id == 0xB0])
+        return gaps.max() - gaps.min()
+    assert wheel_frame_gap_spread(draw_stop(7, clean_sensors=True)) < 1e-6
+    assert wheel_frame_gap_spread(draw_stop(7)) > 1e-4
+
+
+def test_the_reproduce_command_runs_a_clean_sensors_stop(capsys):
+    from .conftest import load_benchmark
+
+    module = load_benchmark("campaign")
+    assert module.main(["--reproduce", "1000002", "--clean-sensors"]) == 0
+    clean = capsys.readouterr().out.splitlines()
+    assert module.main(["--reproduce", "1000002"]) == 0
+    noisy = capsys.readouterr().out.splitlines()
+    # the same stop (family, surfaces, speed), other signals on the bus
+    assert clean[0].split(" km/h")[0] == noisy[0].split(" km/h")[0] and clean[1:] != noisy[1:]
+    assert reproduce_command({"seed": 1000002}, None, clean_sensors=True).startswith(
+        "python benchmarks/campaign.py --reproduce 1000002 --clean-sensors ")

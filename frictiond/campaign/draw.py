@@ -237,6 +237,17 @@ def _draw_sensors(rng: np.random.Generator) -> SensorSpec:
     )
 
 
+def clean(sensors: SensorSpec) -> SensorSpec:
+    """The car's sensors without their imperfections: no noise, jitter, frame loss, offsets or
+    pressure lag, the wheel speeds at the finest resolution. What the car sends (its rates, a
+    master-cylinder pressure, a ground-speed sensor, ABS flags) stays. Another simulator's
+    signals may be this clean: what the noise hides (a stop whose evidence never passes its
+    gates) shows there."""
+    return replace(sensors, wheel_resolution_kmh=min(WHEEL_RESOLUTIONS_KMH), wheel_noise_kmh=0.0, jitter_s=0.0,
+                   drop_rate=0.0, accel_offset_mps2=0.0, accel_lat_offset_mps2=0.0, accel_noise_mps2=0.0,
+                   pressure_lag_s=0.0, pressure_offset_bar=0.0, pressure_noise_bar=0.0)
+
+
 # ------------------------------------------------------------------------------------ driver
 def _peak_mu(curve: TyreCurve, speed_mps: float) -> float:
     return curve.peak[0] * float(curve.speed_factor(speed_mps))
@@ -269,9 +280,10 @@ def _apply_family(choices: list[str], family: str | None) -> list[str]:
     return [_match(c, o, w) for c, o, w in zip(choices, options, parts)]
 
 
-def draw_stop(seed: int, family: str | None = None) -> StopSpec:
+def draw_stop(seed: int, family: str | None = None, clean_sensors: bool = False) -> StopSpec:
     """The stop of `seed`. `family`: "ABS[/TYRE[/MANOEUVRE]]", each part a prefix of one of
-    `ABS_FAMILIES`, `TYRE_FAMILIES`, `MANOEUVRES` or "*" (e.g. "c", "a/magic", "*/*/split")."""
+    `ABS_FAMILIES`, `TYRE_FAMILIES`, `MANOEUVRES` or "*" (e.g. "c", "a/magic", "*/*/split").
+    `clean_sensors`: the same stop with its sensors' imperfections taken off (`clean`)."""
     streams = [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(6)]
     pick, car_rng, tyre_rng, abs_rng, sensor_rng, drive_rng = streams
     choices = [_pick(pick, ABS_FAMILIES, (27, 27, 27, 19)), _pick(pick, TYRE_FAMILIES, (1, 1)),
@@ -286,6 +298,8 @@ def draw_stop(seed: int, family: str | None = None) -> StopSpec:
     abs_params = _draw_abs_params(abs_rng)[abs_family]
     abs_cycle, cutout = abs_rng.uniform(0.005, 0.010), abs_rng.uniform(1.5, 3.0)
     sensors = _draw_sensors(sensor_rng)
+    if clean_sensors:
+        sensors = clean(sensors)
     return _draw_drive(drive_rng, StopSpec(
         seed=int(seed), abs_family=abs_family, tyre_family=tyre_family, manoeuvre=manoeuvre, car=car,
         surfaces=surfaces, relaxation_m=relaxation, sensors=sensors, abs_params=abs_params,

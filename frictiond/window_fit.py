@@ -1,12 +1,11 @@
-"""The estimator's fit over its window, and the change of road read from its residuals.
+"""The estimator's fit over its window.
 
 Each update runs a bounded trust-region step (or a few) from the last solution on the window's
 weighted residuals μ_meas − μ(λ, v; p), the priors and the soft ties between the wheels' θ, with
 the analytic Jacobian: in one compiled call (`_fitcore.fit_window`) when installed, else as the
-normal equations (`_normal`) driven by `trust_region.solve_normal`. Its newest residuals biased
-far beyond the noise are a change of road under the fit: the older samples are dropped
-(`_detect_jump`). `WindowFit` is a part of `LugreTrustRegionEstimator` (its window, parameters
-and options are the estimator's).
+normal equations (`_normal`) driven by `trust_region.solve_normal`. What its newest residuals say
+of a change of road is `road_change.RoadChangeTest`'s. `WindowFit` is a part of
+`LugreTrustRegionEstimator` (its window, parameters and options are the estimator's).
 """
 from __future__ import annotations
 
@@ -15,16 +14,16 @@ import math
 import numpy as np
 
 from . import trust_region
-from .samples import N_WHEELS
-from .samples import FrictionEstimate
+from .road_change import RoadChangeTest
+from .samples import N_WHEELS, FrictionEstimate
 from .tyre_model import _SMALL_Z, braking_mu_and_partials
 
 _WHEEL_COLUMN = np.arange(N_WHEELS)[:, None]
 
 
-class WindowFit:
-    """The update's fit (`_fit`: compiled, or `_normal` + `trust_region.solve_normal`) and the
-    change of road its newest residuals show (`_innovation`, `_front_score`, `_detect_jump`)."""
+class WindowFit(RoadChangeTest):
+    """The update's fit (`_fit`: compiled, or `_normal` + `trust_region.solve_normal`); after
+    each, the change of road its newest residuals show (`RoadChangeTest`)."""
 
     def _residuals(self, x: np.ndarray, slip, speed, mu_meas, sw, wheel, rows_index=None) -> tuple[np.ndarray, np.ndarray]:
         """Weighted data residuals, then the priors, then the soft ties between wheels' θ.
@@ -51,71 +50,6 @@ class WindowFit:
         r[m + n:] = self._tie_rel_d @ x[:N_WHEELS]
         J[m + n:, :N_WHEELS] = self._tie_rel_d
         return r, J
-
-    def _innovation(self, now_s: float, times: np.ndarray, r_data: np.ndarray, weights: np.ndarray) -> float:
-        """How far the newest samples' mean residual sits from zero, in standard errors (and,
-        into `_front_innovation_score`, the front wheels' alone: `_front_score`).
-
-        A few hundred older samples pin the fit, so a change of road shows first as a mean
-        offset of the newest residuals far beyond the noise.
-        """
-        o = self.options
-        first = int(times.searchsorted(now_s - o.jump_window_s, side="left"))   # (times ascend)
-        n_recent = len(times) - first
-        self._front_innovation_score = 0.0
-        if not self._innovation_counts(len(times), n_recent):
-            return 0.0
-        # Back from weighted, normalised residuals to μ units (model − measurement).
-        resid = r_data[first:] * o.measurement_std / np.sqrt(weights[first:])
-        w = self._window
-        front = resid[w.wheel[w.start + first:w.end] < 2]
-        self._front_innovation_score = self._front_score(len(front), *_bias(front))
-        return self._innovation_score_of(n_recent, *_bias(resid))
-
-    def _front_score(self, n_front: int, mean: float, rms: float, same_sign: float) -> float:
-        """`_innovation_score_of` the front wheels' newest residuals alone (0 with fewer than 8).
-
-        A change of road reaches the front axle a wheelbase before the rear one (0.1–0.3 s at
-        30–10 m/s), and the fit's VALID output is wrong from then on. Pooled with the rear
-        wheels' residuals, still on the old road, the front's bias is halved and the opposite
-        signs fail the same-sign test. It lowers the confidence only: a front axle's residuals
-        also lean one way for a moment where its force lags its slip (a relaxing tyre deep in an
-        ABS excursion), and dropping the window on that cost a sixth of the VALID outputs of
-        stops with a change of road. The rear axle is not tested alone: a change reaches it after
-        the front, and its own bias was misfit more often than road (testing it too cost another
-        6 % of the development campaign's VALID outputs, for 5 fewer false ones of 94).
-        """
-        return self._innovation_score_of(n_front, mean, rms, same_sign) if n_front >= 8 else 0.0
-
-    def _innovation_counts(self, samples: int, n_recent: int) -> bool:
-        """Whether the newest `n_recent` of `samples` are enough, and few enough, to judge."""
-        return not (n_recent < 8 or self._fits < 5 or samples - n_recent < 2 * n_recent)
-
-    def _innovation_score_of(self, n_recent: int, mean: float, rms: float, same_sign: float) -> float:
-        o = self.options
-        noise = max(o.measurement_std, rms)
-        score = abs(mean) / (noise / math.sqrt(n_recent))
-        return score if same_sign > 0.7 else min(score, o.jump_threshold)
-
-    def _detect_jump(self, now_s: float, score: float) -> None:
-        """Drop the window's older samples when the newest ones disagree with the fit (a μ jump)."""
-        o = self.options
-        if score > o.jump_threshold * 2.0 and now_s - self._last_jump_s > o.jump_refractory_s:
-            self._window.drop_before(now_s - o.jump_window_s - 1e-9, self.core)
-            self._radius = None  # let the parameters move freely again
-            self._jumps += 1
-            self._last_jump_s = now_s
-            self._jump_times.append(now_s)
-            # What was valid described the old road: nothing may be held VALID from it.
-            self._last_valid = None
-            self._last_excited_s = -math.inf
-            self._excitation_cache = None
-            self._data_above_fit = 0.0
-            self._mu_history.clear()
-            self._body_mu.clear()      # (the grip used on the old road bounds nothing on the new)
-            self._measured_peaks = [0.0] * N_WHEELS
-            self._band_ratio = 0.0
-            self._forget_shown_peaks()   # (the peaks the wheels showed were the old road's)
 
     def _rows(self, x: np.ndarray, lo: int, hi: int, out: np.ndarray) -> None:
         """Unweighted Jacobian rows and model − measurement of window samples [lo, hi) at x.
@@ -318,14 +252,3 @@ class WindowFit:
         self._radius = max(result.radius, 1e-3)
         return result.normal, r_data
 
-
-def _bias(resid: np.ndarray) -> tuple[float, float, float]:
-    """Mean, rms deviation and |Σ sign| / n of residuals (np.mean / np.std without their
-    wrappers: the same operations in the same order as `_fitcore.residual_bias`)."""
-    n = len(resid)
-    if n == 0:
-        return 0.0, 0.0, 0.0
-    mean = float(resid.sum()) / n
-    dev = resid - mean
-    dev *= dev
-    return mean, math.sqrt(float(dev.sum()) / n), abs(float(np.sign(resid).sum()) / n)

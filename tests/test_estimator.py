@@ -854,10 +854,10 @@ def test_a_change_of_road_under_the_front_axle_alone_ends_valid(monkeypatch, fro
     residuals, still on the wet road, the front's bias fails the same-sign test, and the wet
     road's μ stayed VALID (confidence up to 0.64) while the car's grip was 42–44 % higher. (At
     the VALID thresholds of then, 0.55 and 0.5: today's threshold alone would keep those out.)"""
-    from frictiond import window_fit
+    from frictiond import road_change
 
     if not front_test:
-        monkeypatch.setattr(window_fit.WindowFit, "_front_score", lambda self, *bias: 0.0)
+        monkeypatch.setattr(road_change.RoadChangeTest, "_front_score", lambda self, *bias: 0.0)
     stop, estimates = campaign_stop_estimates(50431, family="*/*/jump", valid_confidence=0.55,
                                               keep_valid_confidence=0.5)
     times = np.array([r["time_s"] for r in stop.truth])

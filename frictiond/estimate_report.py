@@ -16,8 +16,7 @@ import math
 import numpy as np
 
 from . import not_valid
-from .samples import N_WHEELS
-from .samples import FrictionEstimate, Status
+from .samples import N_WHEELS, FrictionEstimate, Status
 from .tyre_model import LugreParams, braking_mu_and_partials_few, peaks
 
 _WHEEL_STD_KEYS = tuple(f"wheel_std_{i}" for i in range(N_WHEELS))

@@ -30,9 +30,9 @@ Design (the choices model.md leaves open, and why):
 The excitation evidence is `peak_evidence.PeakEvidence`, the confidence and the vetoes on VALID
 `estimate_confidence.EstimateConfidence`, the report of a fit (peaks, spread, status, hold)
 `estimate_report.EstimateReport`, the fit itself `window_fit.WindowFit` and the change of road
-read from its residuals `road_change.RoadChangeTest`, the parameter vector and its mapping to the tyre model's parameters
-`fit_parameters.FitParameters`, the brake-gain balance between the axles
-`axle_balance.AxleBalance`: parts of the estimator class, each in its own module.
+read from its residuals `road_change.RoadChangeTest`, the parameter vector and its mapping to
+the tyre model's parameters `fit_parameters.FitParameters`, the brake-gain balance between the
+axles `axle_balance.AxleBalance`: parts of the estimator class, each in its own module.
 """
 from __future__ import annotations
 

@@ -1872,7 +1872,8 @@ out:
 
 /* estimator._top_elasticity: one wheel's least-squares slope of μ on slip over its samples of
  * [search_left(times, since), end) whose slip lies between their median and 95 % quantile, as
- * (dμ/dλ)·mean λ / mean μ; None with fewer than min_n samples or min_upper of them in that band. */
+ * (dμ/dλ)·mean λ / mean μ, with that number's standard error from the fit's residuals; None
+ * with fewer than min_n samples or min_upper of them in that band. */
 static PyObject *py_top_elasticity(PyObject *self, PyObject *args)
 {
     (void)self;
@@ -1932,8 +1933,17 @@ static PyObject *py_top_elasticity(PyObject *self, PyObject *args)
             sxy += dl * (mu[j] - u_mean);
             sxx += dl * dl;
         }
-    const double slope = sxy / (sxx > 1e-12 ? sxx : 1e-12);
-    result = PyFloat_FromDouble(slope * l_mean / (u_mean > 1e-6 ? u_mean : 1e-6));
+    const double sxx_ = sxx > 1e-12 ? sxx : 1e-12;
+    const double slope = sxy / sxx_;
+    double rss = 0.0;
+    for (Py_ssize_t j = lo; j < end; j++)
+        if (wheel[j] == wheel_i && slip[j] >= median && slip[j] <= top) {
+            const double r = (mu[j] - u_mean) - slope * (slip[j] - l_mean);
+            rss += r * r;
+        }
+    const double scale = l_mean / (u_mean > 1e-6 ? u_mean : 1e-6);
+    const double slope_se = sqrt(rss / (double)(m > 2 ? m - 2 : 1) / sxx_);
+    result = Py_BuildValue("(dd)", slope * scale, slope_se * scale);
 out:
     PyMem_Free(sorted);
     release_all(b, 4);
@@ -2022,8 +2032,8 @@ static PyMethodDef methods[] = {
      "drift_reference(history, since, span) -> float | None: the median mu_max of the (time, mu_max) pairs\n"
      "from the first at or after since to span after it; None when one of them is NaN"},
     {"top_elasticity", py_top_elasticity, METH_VARARGS,
-     "top_elasticity(slip, mu, wheel, times, start, end, since, wheel_i, min_n, min_upper) -> float | None\n\n"
-     "estimator._top_elasticity: one wheel's local elasticity over the top half of its recent slips."},
+     "top_elasticity(slip, mu, wheel, times, start, end, since, wheel_i, min_n, min_upper) -> (float, float) | None\n\n"
+     "estimator._top_elasticity: one wheel's local elasticity over the top half of its recent slips, and its standard error."},
     {"spread_loss", py_spread_loss, METH_VARARGS,
      "spread_loss(slip, speed, mu, wheel, spread, lo, hi, thetas, params) -> float\n\n"
      "estimator._spread_loss_numpy: the mean share of the fitted mu the filter's spread of slips loses,\n"

@@ -130,6 +130,7 @@ class LugreTROptions:
     unshown_wheel_tolerance: float = 0.1  # VALID: μ_max moves less than this share if the wheels that have not
     #   shown their peak took the others' (split μ: their extrapolated peaks are not evidence)
     flat_elasticity: float = 0.35         # a wheel at its peak: μ's slope over the top of its slips ≤ this × μ/λ
+    rising_elasticity: float = 0.54       # ... and the wheels' pooled slope one standard error up short of this (80 % of a peak)
     flat_window_s: float = 0.5            # ... over the wheel's samples of the newest this long (a few ABS cycles)
     flat_min_samples: int = 8             # ... at least this many of them, half in the top half of the slips
     contradiction_elasticity: float = 0.7     # μ still rising at this share of μ/λ ...
@@ -211,6 +212,8 @@ class LugreTROptions:
             raise ValueError("confidence_band: must be > 0")
         if self.keep_valid_confidence > self.valid_confidence:
             raise ValueError("keep_valid_confidence: must not exceed valid_confidence")
+        if self.rising_elasticity < self.flat_elasticity:
+            raise ValueError("rising_elasticity: must not be below flat_elasticity")
         if self.theta_min <= 0:
             raise ValueError("theta_min: must be > 0")
 

@@ -73,9 +73,9 @@ def _wheel_stats_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, time
     return tuple(out)
 
 def _top_elasticity_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, start: int,
-                          end: int, since: float, wheel_i: int, min_n: int, min_upper: int) -> float | None:
+                          end: int, since: float, wheel_i: int, min_n: int, min_upper: int) -> tuple[float, float] | None:
     """`LugreTrustRegionEstimator._top_elasticity` on the window's columns (the compiled
-    `top_elasticity`'s reference)."""
+    `top_elasticity`'s reference): the elasticity and its standard error."""
     lo = int(times[start:end].searchsorted(since)) + start
     mine = wheel[lo:end] == wheel_i
     slips = slip[lo:end][mine]
@@ -89,8 +89,12 @@ def _top_elasticity_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, t
     ls, us = slips[upper], mus[upper]
     l_mean, u_mean = float(ls.mean()), float(us.mean())
     dl = ls - l_mean
-    slope = float(dl @ (us - u_mean)) / max(float(dl @ dl), 1e-12)
-    return slope * l_mean / max(u_mean, 1e-6)
+    sxx = max(float(dl @ dl), 1e-12)
+    slope = float(dl @ (us - u_mean)) / sxx
+    residuals = (us - u_mean) - slope * dl
+    slope_se = math.sqrt(float(residuals @ residuals) / max(len(ls) - 2, 1) / sxx)
+    scale = l_mean / max(u_mean, 1e-6)
+    return slope * scale, slope_se * scale
 
 class PeakEvidence(RunawayEvidence):
     """The excitation: per wheel a verdict on whether its newest data show the peak, and the
@@ -102,6 +106,8 @@ class PeakEvidence(RunawayEvidence):
         self._wheel_shown_s = [-math.inf] * N_WHEELS
         self._shape_proximity = [0.0] * N_WHEELS
         self._shape_verdict_s = [-math.inf] * N_WHEELS
+        self._road_top_s = math.nan       # (`_road_top_bound` of the check at this time)
+        self._road_top = math.inf
 
     def _slip_range(self, weights: np.ndarray | None) -> tuple[list[float], list[float]]:
         """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
@@ -271,9 +277,10 @@ class PeakEvidence(RunawayEvidence):
         bent = self._bending(lam_hi, s2, s3, s4, y1, y2)
         if bent is not None:
             return bent, 0.0, True
-        elasticity = self._top_elasticity(wheel)
-        if elasticity is None:
+        top = self._top_elasticity(wheel)
+        if top is None:
             return "too few samples at the top slips", 0.0, True
+        elasticity, elasticity_se = top
         if elasticity > o.flat_elasticity:
             if elasticity > o.contradiction_elasticity and lam_hi > o.contradiction_slip_ratio * lam_star:
                 # μ still rising clearly (twice the flat threshold) at slips well past where the
@@ -286,6 +293,13 @@ class PeakEvidence(RunawayEvidence):
             # peak (a wheel-deceleration trigger on a soft tyre, a slip target short of a snow
             # curve's peak) the top slips still show μ rising at 0.4–0.7 of its secant.
             return ("still rising ({:.2f})", elasticity), 0.0, True
+        slope_bound = self._road_top_bound()
+        if slope_bound > o.rising_elasticity:
+            # A flat-looking slope whose road's (the wheels' pooled) is within one standard
+            # error of a curve still at 80 % of its peak is not a flat top: the top slips barely
+            # spread (a slip held below the peak, then a release sweeping under it), or μ
+            # scatters as much as such a curve climbs over them.
+            return ("flat top not resolved ({:.2f})", slope_bound), 0.0, True
         if mu_hi > o.max_peak_secant * lam_hi:
             # Near any road's peak, μ/λ is well below the tyre's initial slip stiffness
             # (dry asphalt ≈ 1.0/0.1, ice ≈ 0.05/0.03); a steep secant is the linear region.
@@ -311,10 +325,30 @@ class PeakEvidence(RunawayEvidence):
             return "no peak", 0.0, True   # no peak short of lock, and the data far below the fitted maximum
         return ("proximity {:.2f}", proximity), proximity, True
 
-    def _top_elasticity(self, wheel: int) -> float | None:
+    def _road_top_bound(self) -> float:
+        """The road's top-of-slips slope one standard error up: the wheels' `_top_elasticity`
+        pooled by their inverse variances (∞ when no wheel has one), once per excitation check.
+
+        The slope over the top of the slips, as an elasticity, is the shape of the curve near
+        its peak, which the four tyres on one road share whatever their loads; one wheel's
+        samples alone leave it ±1 on ice, where μ is small against the noise of a measured μ.
+        (On split μ the sides' shapes differ: the pooled bound is then the average road's, and
+        each wheel's own slope must still be flat.)
+        """
+        if self._road_top_s != self._last_sample_s:
+            tops = [t for t in map(self._top_elasticity, range(N_WHEELS)) if t is not None]
+            weights = [1.0 / max(se, 1e-9) ** 2 for _, se in tops]
+            total = sum(weights)
+            self._road_top = (sum(w * e for w, (e, _) in zip(weights, tops)) / total + 1.0 / math.sqrt(total)
+                              if tops else math.inf)
+            self._road_top_s = self._last_sample_s
+        return self._road_top
+
+    def _top_elasticity(self, wheel: int) -> tuple[float, float] | None:
         """The wheel's local elasticity (dμ/dλ)·λ̄/μ̄ over the top half of its slips of the newest
         `flat_window_s`: a least-squares slope over the samples between the median slip and the
-        95 % quantile (the single highest are noise and runaway), None without enough of them.
+        95 % quantile (the single highest are noise and runaway), with its standard error from
+        the residuals; None without enough of them.
 
         1 on a linear flank, ≈ 0 at the peak, < 0 past it. At 90 % of the peak the tangent is
         about a third of the secant: median 0.36 over Magic Formula shapes (B 4–14, C 1.2–2.5,

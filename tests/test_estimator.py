@@ -176,6 +176,8 @@ def test_options_are_validated():
         LugreTrustRegionEstimator(LugreTROptions(max_iterations=0))
     with pytest.raises(ValueError, match="prior_std_log_theta"):
         LugreTrustRegionEstimator(LugreTROptions(prior_std_log_theta=0.0))
+    with pytest.raises(ValueError, match="rising_elasticity"):
+        LugreTrustRegionEstimator(LugreTROptions(flat_elasticity=0.35, rising_elasticity=0.3))
 
 
 def test_baseline_recovers_burckhardt_peak():
@@ -706,12 +708,45 @@ def test_a_held_slip_carries_its_wheel_last_verdict_only_while_that_verdict_samp
 ])
 def test_mu_rising_well_past_the_fitted_peak_contradicts_the_fit(elasticity, fitted_peak_slip, contradicted):
     est = LugreTrustRegionEstimator()
-    est._top_elasticity = lambda wheel: elasticity
+    est._top_elasticity = lambda wheel: (elasticity, 0.0)
     est._bending = lambda *a: None     # (the data bend over: the verdict reaches the top-of-slips test)
     stats = (50.0, 0.05, 0.2, 0.05, 0.2, 0.5, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0)
     why, proximity, _fresh = est._wheel_verdict(0, stats, 0.55, fitted_peak_slip, 0.5, False, 20.0, False, True)
     assert (proximity == CONTRADICTED) == contradicted
     assert proximity <= 0.0    # (either way this wheel shows no peak)
+
+
+@pytest.mark.parametrize("tops, flat", [
+    ([(0.20, 0.05)] * 4, True),                   # every wheel's top slope well under the threshold
+    ([(0.30, 0.20), None, None, None], True),     # near it, but clear of a curve at 80 % of its peak (0.54)
+    ([(0.30, 0.30), None, None, None], False),    # as near, and within its noise of such a curve
+    ([(0.30, 0.30)] + [(0.25, 0.10)] * 3, True),  # ... which the other wheels' slopes on the same road resolve
+    ([(-1.2, 2.0), None, None, None], False),     # "past the peak" by a slope that is all noise
+])
+def test_a_flat_top_must_be_clear_of_a_rising_curve_beyond_its_noise(tops, flat):
+    # Dev stop 20941: a slip controller held λ ≈ 0.1 on a dry Magic Formula tyre at 82 % of
+    # its peak, then the driver released; the held samples and the release's sweep below them
+    # gave slopes of about zero ± several times the flat threshold over slips 0.095–0.105,
+    # and 32 outputs went VALID 22 % low. The four wheels' slopes are pooled (one road, one
+    # shape near the peak): on ice one wheel's is ±1.
+    est = LugreTrustRegionEstimator()
+    est._top_elasticity = lambda wheel: tops[wheel]
+    est._bending = lambda *a: None
+    stats = (50.0, 0.05, 0.2, 0.05, 0.2, 0.5, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0)
+    why, proximity, _fresh = est._wheel_verdict(0, stats, 0.52, 0.2, 0.52, False, 20.0, False, True)
+    assert (proximity >= est.options.excitation_slip_ratio) == flat
+    assert (why[0].startswith("flat top not resolved")) == (not flat)
+
+
+def test_a_release_sweeping_under_a_held_slip_is_no_flat_top():
+    # Dev stop 20941 (its story above): the top slips' slope is about zero, and noise. Without
+    # the bound on it (`rising_elasticity` out of reach) the same stop goes VALID 22 % low.
+    from frictiond.campaign.score import estimator_scores
+
+    stop, estimates = campaign_stop_estimates(20941)
+    assert estimator_scores(estimates, stop.truth)["false_valid"] == 0
+    stop, unbounded = campaign_stop_estimates(20941, rising_elasticity=100.0)
+    assert estimator_scores(unbounded, stop.truth)["false_valid"] > 10
 
 
 def test_one_wheel_contradicting_the_fit_leaves_no_excitation(monkeypatch):

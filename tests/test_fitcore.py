@@ -685,6 +685,31 @@ def test_top_elasticity_compiled_equals_numpy():
     assert defined > 300   # (the comparison ran on real values, not only on the Nones)
 
 
+def test_top_elasticity_standard_error_is_the_slopes():
+    # μ = a + b·λ + noise over one wheel's top slips: the elasticity is b·λ̄/μ̄ and its standard
+    # error the regression's, which shrinks as the slips spread and grows with the noise.
+    from frictiond.peak_evidence import _top_elasticity_numpy
+
+    rng = np.random.default_rng(3)
+    errors = {}
+    for spread, noise in ((0.02, 0.01), (0.002, 0.01), (0.02, 0.0)):
+        n = 200
+        slip = 0.1 + spread * rng.random(n)
+        mu = 0.5 + 1.0 * (slip - 0.1) + noise * rng.standard_normal(n)
+        args = (slip, mu, np.zeros(n, dtype=np.intp), np.linspace(0.0, 1.0, n), 0, n, -1.0, 0, 8, 4)
+        (el, se), (el_c, se_c) = _top_elasticity_numpy(*args), core.top_elasticity(*args)
+        upper = (slip >= np.quantile(slip, 0.5)) & (slip <= np.quantile(slip, 0.95))
+        fit, cov = np.polyfit(slip[upper], mu[upper], 1, cov="unscaled")
+        scale = slip[upper].mean() / mu[upper].mean()
+        resid = mu[upper] - np.polyval(fit, slip[upper])
+        assert el == pytest.approx(fit[0] * scale, rel=1e-9)
+        assert se == pytest.approx(np.sqrt(resid @ resid / (upper.sum() - 2) * cov[0, 0]) * scale, rel=1e-6, abs=1e-12)
+        assert (el_c, se_c) == pytest.approx((el, se), rel=1e-9, abs=1e-12)
+        errors[spread, noise] = se
+    assert errors[0.002, 0.01] > 5 * errors[0.02, 0.01] > 0
+    assert errors[0.02, 0.0] < 1e-9
+
+
 def test_spread_loss_compiled_equals_numpy():
     # Windows of random slips and μ with and without a spread (some wheels' ends far apart, over
     # the peak; some none), at random parameters: the compiled mean over the top of each wheel's

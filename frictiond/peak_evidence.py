@@ -106,8 +106,8 @@ class PeakEvidence(RunawayEvidence):
         self._wheel_shown_s = [-math.inf] * N_WHEELS
         self._shape_proximity = [0.0] * N_WHEELS
         self._shape_verdict_s = [-math.inf] * N_WHEELS
-        self._road_top_s = math.nan       # (`_road_top_bound` of the check at this time)
-        self._road_top = math.inf
+        self._tops_fit = -1               # (`_wheel_tops` of the window this fit saw)
+        self._tops: list[tuple[float, float] | None] = [None] * N_WHEELS
 
     def _slip_range(self, weights: np.ndarray | None) -> tuple[list[float], list[float]]:
         """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
@@ -277,7 +277,7 @@ class PeakEvidence(RunawayEvidence):
         bent = self._bending(lam_hi, s2, s3, s4, y1, y2)
         if bent is not None:
             return bent, 0.0, True
-        top = self._top_elasticity(wheel)
+        top = self._wheel_tops()[wheel]
         if top is None:
             return "too few samples at the top slips", 0.0, True
         elasticity, elasticity_se = top
@@ -325,9 +325,17 @@ class PeakEvidence(RunawayEvidence):
             return "no peak", 0.0, True   # no peak short of lock, and the data far below the fitted maximum
         return ("proximity {:.2f}", proximity), proximity, True
 
+    def _wheel_tops(self) -> list[tuple[float, float] | None]:
+        """Each wheel's `_top_elasticity` over the window of this fit, computed once for the
+        wheels' own verdicts and the road's bound (`_road_top_bound`)."""
+        if self._tops_fit != self._fits:
+            self._tops = [self._top_elasticity(w) for w in range(N_WHEELS)]
+            self._tops_fit = self._fits
+        return self._tops
+
     def _road_top_bound(self) -> float:
         """The road's top-of-slips slope one standard error up: the wheels' `_top_elasticity`
-        pooled by their inverse variances (∞ when no wheel has one), once per excitation check.
+        pooled by their inverse variances (∞ when no wheel has one).
 
         The slope over the top of the slips, as an elasticity, is the shape of the curve near
         its peak, which the four tyres on one road share whatever their loads; one wheel's
@@ -335,14 +343,12 @@ class PeakEvidence(RunawayEvidence):
         (On split μ the sides' shapes differ: the pooled bound is then the average road's, and
         each wheel's own slope must still be flat.)
         """
-        if self._road_top_s != self._last_sample_s:
-            tops = [t for t in map(self._top_elasticity, range(N_WHEELS)) if t is not None]
-            weights = [1.0 / max(se, 1e-9) ** 2 for _, se in tops]
-            total = sum(weights)
-            self._road_top = (sum(w * e for w, (e, _) in zip(weights, tops)) / total + 1.0 / math.sqrt(total)
-                              if tops else math.inf)
-            self._road_top_s = self._last_sample_s
-        return self._road_top
+        tops = [t for t in self._wheel_tops() if t is not None]
+        if not tops:
+            return math.inf
+        weights = [1.0 / max(se, 1e-9) ** 2 for _, se in tops]
+        total = sum(weights)
+        return sum(w * e for w, (e, _) in zip(weights, tops)) / total + 1.0 / math.sqrt(total)
 
     def _top_elasticity(self, wheel: int) -> tuple[float, float] | None:
         """The wheel's local elasticity (dμ/dλ)·λ̄/μ̄ over the top half of its slips of the newest

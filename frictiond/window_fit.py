@@ -251,4 +251,3 @@ class WindowFit(RoadChangeTest):
         self._x = result.x
         self._radius = max(result.radius, 1e-3)
         return result.normal, r_data
-

@@ -495,6 +495,7 @@ enum {
 #define PRESSURE_TOLERANCE 0.25
 #define UNLEARNT_ACCEL_TOLERANCE 0.3
 #define ACCEL_BIAS_LEARNT_SAMPLES 50
+#define ACCEL_BIAS_PRIOR_SAMPLES 2.0
 #define PRESSURE_SENSOR_LAG 0.04
 #define MAX_PRESSURE_LAG 0.05
 #define MIN_PRESSURE_LAG 0.002
@@ -508,9 +509,9 @@ enum {
 #define GRAVITY 9.80665
 
 /* The FrontEnd attributes sample_physics reads and writes. */
-static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples,
+static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples, *A_bias_m2,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
-    *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_model_holds, *A_released,
+    *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_gain_doubt, *A_model_holds, *A_released,
     *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_restarted_braking;
 
 typedef struct {
@@ -521,7 +522,8 @@ typedef struct {
     int has_last_sample, has_speed_time, has_speed_est, has_faster_since, restarted_braking;
     double last_sample, bias, unexplained, speed_time, speed_est, slipping_time, faster_since;
     long bias_samples, ref_disagreements;
-    double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor;
+    double bias_m2;
+    double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor, gain_doubt;
     double unjudged;
     int model_holds, released;
     double lag[LAG_N];
@@ -602,6 +604,7 @@ static int load_state(PyObject *fe, FEState *s)
     }
     if (get_float_attr(fe, A_last_sample, &s->last_sample, &s->has_last_sample) < 0
         || get_float_attr(fe, A_bias, &s->bias, NULL) < 0 || get_long_attr(fe, A_bias_samples, &s->bias_samples) < 0
+        || get_float_attr(fe, A_bias_m2, &s->bias_m2, NULL) < 0
         || get_float_attr(fe, A_slipping_time, &s->slipping_time, NULL) < 0
         || get_float_attr(fe, A_unexplained, &s->unexplained, NULL) < 0
         || get_float_attr(fe, A_speed_time, &s->speed_time, &s->has_speed_time) < 0
@@ -617,6 +620,7 @@ static int load_state(PyObject *fe, FEState *s)
         || get_float_attr(fe, A_recent_brake, &s->recent_brake, NULL) < 0
         || get_bool_attr(fe, A_released, &s->released) < 0
         || get_float_attr(fe, A_gain_factor, &s->gain_factor, NULL) < 0
+        || get_float_attr(fe, A_gain_doubt, &s->gain_doubt, NULL) < 0
         || get_bool_attr(fe, A_model_holds, &s->model_holds) < 0
         || get_float_attr(fe, A_unjudged, &s->unjudged, NULL) < 0)
         goto out;
@@ -679,6 +683,7 @@ static int store_state(PyObject *fe, const FEState *s)
     if (set_attr_new(fe, A_last_sample, float_or_none(s->has_last_sample, s->last_sample)) < 0
         || set_attr_new(fe, A_bias, PyFloat_FromDouble(s->bias)) < 0
         || set_attr_new(fe, A_bias_samples, PyLong_FromLong(s->bias_samples)) < 0
+        || set_attr_new(fe, A_bias_m2, PyFloat_FromDouble(s->bias_m2)) < 0
         || set_attr_new(fe, A_slipping_time, PyFloat_FromDouble(s->slipping_time)) < 0
         || set_attr_new(fe, A_unexplained, PyFloat_FromDouble(s->unexplained)) < 0
         || set_attr_new(fe, A_speed_time, float_or_none(s->has_speed_time, s->speed_time)) < 0
@@ -695,6 +700,7 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_recent_brake, PyFloat_FromDouble(s->recent_brake)) < 0
         || set_attr_new(fe, A_released, PyBool_FromLong(s->released)) < 0
         || set_attr_new(fe, A_gain_factor, PyFloat_FromDouble(s->gain_factor)) < 0
+        || set_attr_new(fe, A_gain_doubt, PyFloat_FromDouble(s->gain_doubt)) < 0
         || set_attr_new(fe, A_model_holds, PyBool_FromLong(s->model_holds)) < 0
         || set_attr_new(fe, A_unjudged, PyFloat_FromDouble(s->unjudged)) < 0
         || set_attr_new(fe, A_lag_state, tuple_of(s->lag, LAG_N)) < 0)
@@ -860,6 +866,30 @@ static void learn_pressure_lag(FEState *s, const double *k, double brake, double
     s->lag[0] = s_bb, s->lag[1] = s_bd, s->lag[2] = s_dd, s->lag[3] = s_bn, s->lag[4] = s_dn;
 }
 
+/* body_equation.offset_doubt_mps2: what the learnt accelerometer offset may still be off by. */
+static double offset_doubt(long samples, double sum_squares)
+{
+    if (samples >= ACCEL_BIAS_LEARNT_SAMPLES)
+        return 0.0;
+    const double variance = (sum_squares + ACCEL_BIAS_PRIOR_SAMPLES * UNLEARNT_ACCEL_TOLERANCE * UNLEARNT_ACCEL_TOLERANCE)
+                            / ((double)(samples > 1 ? samples - 1 : 0) + ACCEL_BIAS_PRIOR_SAMPLES);
+    return py_min(UNLEARNT_ACCEL_TOLERANCE, sqrt(3.0 * variance / (double)(samples > 1 ? samples : 1)));
+}
+
+/* body_equation.gain_within_offset_ambiguity: the middle of what the gain limits (1 ± limits) and
+ * the body equation (gain ± ambiguity) both allow, its half-width into *doubt. */
+static double gain_within_offset_ambiguity(double gain, double limits, double ambiguity, double *doubt)
+{
+    *doubt = 0.0;
+    if (ambiguity <= 0.0)
+        return gain;
+    const double low = py_max(1.0 - limits, gain - ambiguity), high = py_min(1.0 + limits, gain + ambiguity);
+    if (low > high)
+        return gain;
+    *doubt = 0.5 * (high - low);
+    return 0.5 * (low + high);
+}
+
 /* body_equation._unexplained_torque, on the window sums of `s`. */
 static double unexplained_torque(const FEState *s, double low, double high)
 {
@@ -932,7 +962,12 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
         const double weight = total_brake * total_brake;
         s->gain_tt = keep * s->gain_tt + weight;
         s->gain_tn = keep * s->gain_tn + weight * ratio;
-        s->gain_factor = s->gain_tn / s->gain_tt;
+        /* (body_equation.BodyEquation._unlearnt_offset_torque_nm) */
+        const double doubt = offset_doubt(s->bias_samples, s->bias_m2);
+        const double ambiguity = doubt > 0.0 && s->recent_brake > 0.0
+            ? k[K_MASS] * k[K_RADIUS] * doubt / py_max(s->recent_brake / py_max(s->recent_weight, 1e-9), 1e-9)
+            : 0.0;
+        s->gain_factor = gain_within_offset_ambiguity(s->gain_tn / s->gain_tt, lim, ambiguity, &s->gain_doubt);
     }
 }
 
@@ -1104,7 +1139,9 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         if (fabs(error) < 2.0) {
             s.bias_samples += 1;
             alpha = py_max(alpha, 1.0 / (double)s.bias_samples);
-            s.bias += alpha * (error - s.bias);
+            const double before = s.bias;
+            s.bias += alpha * (error - before);
+            s.bias_m2 += (error - before) * (error - s.bias);
         }
     }
     double yaw_rate = 0.0;
@@ -1223,12 +1260,12 @@ static int intern_attributes(void)
     struct { PyObject **slot; const char *name; } names[] = {
         {&A_repeats, "_repeats"}, {&A_dead, "_dead"}, {&A_low_since, "_low_since_s"},
         {&A_low_unbraked, "_low_unbraked_s"}, {&A_last_sample, "_last_sample_time_s"}, {&A_bias, "_accel_bias_mps2"},
-        {&A_bias_samples, "_accel_bias_samples"}, {&A_unexplained, "_unexplained_s"},
+        {&A_bias_samples, "_accel_bias_samples"}, {&A_bias_m2, "_accel_bias_m2"}, {&A_unexplained, "_unexplained_s"},
         {&A_speed_time, "_speed_time_s"}, {&A_speed_est, "_speed_estimate_mps"},
         {&A_ref_disagreements, "_ref_disagreements"}, {&A_gain_tt, "_gain_sum_tt"}, {&A_gain_tn, "_gain_sum_tn"},
         {&A_recent_weight, "_recent_weight_nm"},
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
-        {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"},
+        {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"}, {&A_gain_doubt, "_brake_gain_doubt"},
         {&A_model_holds, "_brake_model_holds"}, {&A_unjudged, "_unjudged_s"}, {&A_lag_state, "_lag_state"},
         {&A_slipping_time, "_slipping_time_s"}, {&A_faster_since, "_wheels_faster_since_s"},
         {&A_restarted_braking, "_speed_restarted_braking"},

@@ -29,6 +29,10 @@ PRESSURE_TOLERANCE_BAR = 0.25
 # offset a sensor may have (a fault seen right after start-up would be the accelerometer's).
 UNLEARNT_ACCEL_TOLERANCE_MPS2 = 0.3
 ACCEL_BIAS_LEARNT_SAMPLES = 50
+# How far the offset learnt so far may be off (`offset_doubt_mps2`): its samples' standard error,
+# their spread taken with a prior of this many samples spread by the tolerance above (two or three
+# samples that happen to agree do not make an offset known). (Also in _frontcore.c.)
+ACCEL_BIAS_PRIOR_SAMPLES = 2.0
 # ... and while the brakes' torque moves, what a pressure sensor trailing it by this long misses
 # (a pedal applied at 1,500 bar/s, an ABS dump: tens of bar).
 PRESSURE_SENSOR_LAG_S = 0.04
@@ -47,7 +51,9 @@ _PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
 LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
-                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_lag_state")
+                 "_brake_gain_doubt",
+                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_accel_bias_m2",
+                 "_lag_state")
 
 
 class BodyEquation:
@@ -58,8 +64,10 @@ class BodyEquation:
         """What the body equation has learnt: nothing yet."""
         self._accel_bias_mps2 = 0.0
         self._accel_bias_samples = 0
+        self._accel_bias_m2 = 0.0           # Σ of squared deviations from the running mean (Welford)
         self._slipping_time_s = -math.inf   # the newest sample with a braked wheel slipping
         self._brake_gain_factor = 1.0
+        self._brake_gain_doubt = 0.0        # what the body equation leaves of its error (`gain_within_offset_ambiguity`)
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
         # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...
         self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
@@ -76,6 +84,12 @@ class BodyEquation:
     @property
     def brake_gain_factor(self) -> float:
         return self._brake_gain_factor
+
+    @property
+    def brake_gain_doubt(self) -> float:
+        """How far the brake gain may still be off, as a share of it (the half-width of what the
+        gain limits and the body equation allow): 0 once the accelerometer's offset is learnt."""
+        return self._brake_gain_doubt
 
     @property
     def wheel_torques_unknown(self) -> bool:
@@ -103,7 +117,9 @@ class BodyEquation:
             # start-up the offset is known after a second of rolling, not only after several τ.
             self._accel_bias_samples += 1
             alpha = max(alpha, 1.0 / self._accel_bias_samples)
-            self._accel_bias_mps2 += alpha * (error - self._accel_bias_mps2)
+            before = self._accel_bias_mps2
+            self._accel_bias_mps2 += alpha * (error - before)
+            self._accel_bias_m2 += (error - before) * (error - self._accel_bias_mps2)
 
     def _update_brake_gain(
         self,
@@ -213,7 +229,19 @@ class BodyEquation:
         weight = total_brake * total_brake
         self._gain_sum_tt = keep * self._gain_sum_tt + weight
         self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
-        self._brake_gain_factor = self._gain_sum_tn / self._gain_sum_tt
+        self._brake_gain_factor, self._brake_gain_doubt = gain_within_offset_ambiguity(
+            self._gain_sum_tn / self._gain_sum_tt, lim, self._unlearnt_offset_torque_nm())
+
+    def _unlearnt_offset_torque_nm(self) -> float:
+        """The share of the brakes' torque that what is not yet learnt of the accelerometer's
+        offset may hide: `offset_doubt_mps2` times mass and radius, over the brake-weighted mean
+        brake torque of the last ~0.2 s (0 once the offset is learnt)."""
+        doubt = offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2)
+        if doubt <= 0.0 or self._recent_brake_nm <= 0.0:
+            return 0.0
+        veh = self.vehicle
+        mean_brake = self._recent_brake_nm / max(self._recent_weight_nm, 1e-9)
+        return veh.mass * veh.wheel_radius * doubt / max(mean_brake, 1e-9)
 
     def _brake_torque_rates(self, time_s: float, torques: list[float]) -> list[float]:
         """Each wheel's matched brake torque's rate since the last sample (0 after a gap, and
@@ -251,6 +279,36 @@ class BodyEquation:
                 lag = min(max(k_lag / k, 0.0), MAX_PRESSURE_LAG_S)
                 lag = lag if lag >= MIN_PRESSURE_LAG_S else 0.0
         self._lag_state = (s_bb, s_bd, s_dd, s_bn, s_dn, lag) + self._lag_state[6:]
+
+
+def offset_doubt_mps2(samples: int, sum_squares: float) -> float:
+    """How far the accelerometer offset learnt from `samples` free-rolling samples (their squared
+    deviations summing to `sum_squares`) may be off, as the half-width of a uniform error of the
+    same σ as its standard error (√3 σ): at most `UNLEARNT_ACCEL_TOLERANCE_MPS2` (none learnt),
+    0 once learnt (`ACCEL_BIAS_LEARNT_SAMPLES`, as the brake check counts it). The samples'
+    spread is 0.07–0.5 m/s² by car and sensors: three samples leave the offset 0.25 m/s² off,
+    forty 0.01–0.03."""
+    if samples >= ACCEL_BIAS_LEARNT_SAMPLES:
+        return 0.0
+    prior = ACCEL_BIAS_PRIOR_SAMPLES
+    variance = (sum_squares + prior * UNLEARNT_ACCEL_TOLERANCE_MPS2**2) / (max(samples - 1, 0) + prior)
+    return min(UNLEARNT_ACCEL_TOLERANCE_MPS2, math.sqrt(3.0 * variance / max(samples, 1)))
+
+
+def gain_within_offset_ambiguity(gain: float, limits: float, ambiguity: float) -> tuple[float, float]:
+    """The brake gain the body equation supports when an accelerometer offset may account for
+    `ambiguity` of it (a share of the brakes' torque), and how far off it may still be: the middle
+    and the half-width of what both the gain limits (1 ± `limits`) and the body equation
+    (`gain` ± `ambiguity`) allow. Before free rolling has taught the offset it may be 0.3 m/s²: on
+    snow (1.2 m/s² of deceleration) a quarter of the brakes' torque, and the gain learnt from it
+    was 23 % high where the brakes were 5 % strong, the wheels' μ with it, VALID at confidence
+    0.95. A well resolved gain (dry asphalt: 3 %) stays as learnt. (`_frontcore.c`'s
+    `gain_within_offset_ambiguity` is the same.)"""
+    if ambiguity <= 0.0:
+        return gain, 0.0
+    low = max(1.0 - limits, gain - ambiguity)
+    high = min(1.0 + limits, gain + ambiguity)
+    return (0.5 * (low + high), 0.5 * (high - low)) if low <= high else (gain, 0.0)
 
 
 def _unexplained_torque(needed: float, brake: float, lag: float, weight: float, low: float, high: float) -> float:

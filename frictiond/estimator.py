@@ -472,6 +472,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._last_sample_s = -math.inf
         self._residual_scale = 1.0
         self._input_share = 0.0   # the newest sample's share of corrupted input (input_quality)
+        self._brake_gain_doubt = 0.0   # the newest sample's `brake_gain_doubt` (`_confidence`)
         self._load_share = [1.0 / N_WHEELS] * N_WHEELS
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
@@ -578,6 +579,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             self._restart_after_clock_step(t)
         self._last_sample_s = t
         self._input_share = sample.input_suspect_share   # (corrupted input costs confidence: input_quality)
+        self._brake_gain_doubt = sample.brake_gain_doubt
         window.drop_before(t - o.window_s, self.core)
         fresh = len(window) == 0
         v = sample.speed_mps

@@ -906,3 +906,16 @@ def test_a_change_of_road_under_the_front_axle_alone_ends_valid(monkeypatch, fro
         assert false_valid == 0
     else:
         assert false_valid >= 20      # (the premise: without it, 44)
+
+
+def test_a_brake_gain_the_body_equation_leaves_in_doubt_is_no_valid():
+    # The same stop twice; the second time the front end says the brake gain (every wheel's μ with
+    # it) may be off by up to 20 %: an accelerometer offset not yet learnt on a slippery road. That
+    # alone is a σ of 11.5 %, more than VALID allows; the first stop is VALID.
+    p = tm.LugreParams()
+    mu_fn, lam_fn = lugre_curve(p)
+    for doubt, valid_expected in ((0.0, True), (0.2, False)):
+        est = LugreTrustRegionEstimator()
+        statuses = [est.update(dataclasses.replace(s, brake_gain_doubt=doubt)).status
+                    for s in braking(lambda t, i: (mu_fn, lam_fn), duration=2.0, noise=0.01)]
+        assert (Status.VALID in statuses) == valid_expected, doubt

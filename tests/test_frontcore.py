@@ -42,7 +42,7 @@ def test_the_front_end_says_the_same_on_both_paths(scenario, seed, spike_thresho
         assert (a.sample is None) == (b.sample is None) and a.fault == b.fault and a.dead_wheels == b.dead_wheels
         if a.sample is not None:
             samples += 1
-            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n"):
+            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n", "brake_gain_doubt"):
                 np.testing.assert_allclose(getattr(a.sample, field), getattr(b.sample, field), rtol=1e-9, atol=1e-12)
             assert a.sample.usable == b.sample.usable and a.sample.abs_active == b.sample.abs_active
             assert (a.sample.slip_spread is None) == (b.sample.slip_spread is None)
@@ -232,10 +232,10 @@ def test_history_push_is_the_same_on_both_paths():
 
 # The state `_frontcore.sample_physics` carries between samples (on the FrontEnd's attributes).
 PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_sample_time_s", "_accel_bias_mps2",
-                 "_accel_bias_samples", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
+                 "_accel_bias_samples", "_accel_bias_m2", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
                  "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",
-                 "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_model_holds", "_unjudged_s",
-                 "_lag_state", "_slipping_time_s")
+                 "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_gain_doubt", "_brake_model_holds",
+                 "_unjudged_s", "_lag_state", "_slipping_time_s")
 
 
 def _physics_stream(seed: int, steps: int):
@@ -300,7 +300,7 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
 
     compiled, floats = make(), make()
     floats.core = None
-    faults, samples, from_ref, dead, lag = set(), 0, 0, 0, 0.0
+    faults, samples, from_ref, dead, lag, doubted = set(), 0, 0, 0, 0.0, 0
     for t, message, values in _physics_stream(seed, 3000):
         a, b = compiled.push(t, message, values), floats.push(t, message, values)
         assert (a is None) == (b is None)
@@ -312,7 +312,8 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
             samples += 1
             from_ref += a.sample.speed_from_reference
             dead += bool(a.dead_wheels)
-            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n"):
+            doubted += a.sample.brake_gain_doubt > 0.0
+            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n", "brake_gain_doubt"):
                 np.testing.assert_allclose(getattr(a.sample, field), getattr(b.sample, field), rtol=1e-12, atol=1e-12)
             assert (a.sample.usable, a.sample.braking, a.sample.speed_from_reference) == \
                    (b.sample.usable, b.sample.braking, b.sample.speed_from_reference)
@@ -327,6 +328,7 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
     assert {"acceleration out of range", "brake pressure out of range", "brake pressure implausible",
             "wheel speed stuck", "wheel speed glitch", None} <= faults, faults
     assert samples > 1000 and 0 < from_ref < samples and dead > 5
+    assert 0 < doubted < samples    # (braking before the accelerometer's offset was learnt, and after)
     assert lag > 0.002    # (the pressure-lag compensation was at work, not only its zero)
 
 

@@ -8,6 +8,7 @@ import random
 
 import pytest
 
+from frictiond.body_equation import ACCEL_BIAS_LEARNT_SAMPLES, gain_within_offset_ambiguity, offset_doubt_mps2
 from frictiond.frontend import (
     DRIVE_TORQUE_NAMES,
     PRESSURE_NAMES,
@@ -565,11 +566,12 @@ def test_master_pressure_says_nothing_for_the_rest_of_a_stop_once_an_abs_release
     assert next_stop and all(all(r.sample.usable) for r in next_stop)
 
 
-def feed_phases(fe: FrontEnd, phases, slip: float = 0.03, pressure_lag: float = 0.0) -> list:
+def feed_phases(fe: FrontEnd, phases, slip: float = 0.03, pressure_lag: float = 0.0,
+                accel_offset: float = 0.0) -> list:
     """Straight-line driving through `phases`, each (duration, deceleration(t in phase), the brake
     pressure the sensors read(t in phase)); the speed and wheel speeds integrate the deceleration,
-    so the phases join smoothly. The pressure sensors read their value `pressure_lag` late.
-    Returns (time, result) pairs."""
+    so the phases join smoothly. The pressure sensors read their value `pressure_lag` late, the
+    accelerometer `accel_offset` above the car's acceleration. Returns (time, result) pairs."""
     dt, t, v = 0.01, 0.0, 30.0
     schedule, start = [], 0.0
     for duration, decel, pressure in phases:
@@ -589,7 +591,7 @@ def feed_phases(fe: FrontEnd, phases, slip: float = 0.03, pressure_lag: float = 
         tp0, _, reading = phase_at(max(t - pressure_lag, 0.0))
         w = v * (1 - slip) / VEH.wheel_radius
         for name, values in (("WHEELS", dict(zip(WHEEL_SPEED_NAMES, (w,) * 4))),
-                             ("ACCEL", {"accel_long": -a, "accel_lat": 0.0, "yaw_rate": 0.0}),
+                             ("ACCEL", {"accel_long": accel_offset - a, "accel_lat": 0.0, "yaw_rate": 0.0}),
                              ("PRESS", dict(zip(PRESSURE_NAMES, (reading(max(t - pressure_lag, 0.0) - tp0),) * 4)))):
             r = fe.push(t, name, values)
             if r is not None:
@@ -859,3 +861,43 @@ def test_wheels_closing_their_slip_after_the_brakes_teach_the_accelerometer_no_o
     assert unsettled[3.45] < learnt[1.49] - 0.1           # (which would have taken the offset away)
     assert learnt[3.99] == pytest.approx(0.2, abs=0.03)   # and learning again after it
     assert learnt[3.99] != learnt[3.45]
+
+
+def test_the_offset_learnt_is_doubted_by_its_standard_error_until_learnt():
+    assert offset_doubt_mps2(0, 0.0) == 0.3                       # nothing learnt: the sensor's tolerance
+    agreeing = offset_doubt_mps2(3, 0.0)                          # three samples that agree prove little
+    assert 0.2 < agreeing <= 0.3
+    spread_01 = offset_doubt_mps2(40, 39 * 0.1**2)                # forty samples spread by 0.1 m/s²
+    assert spread_01 == pytest.approx(math.sqrt(3 * (39 * 0.01 + 2 * 0.09) / 41 / 40), rel=1e-9)
+    assert spread_01 < offset_doubt_mps2(40, 39 * 0.3**2) < 0.3
+    assert offset_doubt_mps2(ACCEL_BIAS_LEARNT_SAMPLES, 1.0) == 0.0
+
+
+def test_the_gain_is_the_middle_of_what_the_limits_and_an_unlearnt_offset_allow():
+    assert gain_within_offset_ambiguity(1.23, 0.25, 0.0) == (1.23, 0.0)
+    gain, doubt = gain_within_offset_ambiguity(1.23, 0.25, 0.25)     # [0.98, 1.25]
+    assert gain == pytest.approx(1.115) and doubt == pytest.approx(0.135)
+    assert gain_within_offset_ambiguity(0.95, 0.25, 0.6) == pytest.approx((1.0, 0.25))   # nothing resolved
+    assert gain_within_offset_ambiguity(1.15, 0.25, 0.01) == pytest.approx((1.15, 0.01))  # well resolved
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("free_rolling_s", [0.0, 1.2])
+def test_an_accelerometer_offset_not_yet_learnt_is_not_taken_for_strong_brakes(compiled, free_rolling_s):
+    # Snow: the car slows by 1.2 m/s² on brakes exactly as configured, and the accelerometer reads
+    # 0.25 m/s² more. Braking right after start-up, the body equation cannot tell the offset from
+    # brakes 20 % too strong: the gain stays near the middle of what the limits allow, and says so.
+    # After free rolling has taught the offset, the same stop's gain is learnt as it is, without doubt.
+    fe = _front_end(compiled)
+    needed = _needed_pressure(1.2, 0.03, 25.0)
+    rolling = [(free_rolling_s, lambda t: 0.0, lambda t: 0.0)] if free_rolling_s else []
+    results = feed_phases(fe, rolling + [(2.0, lambda t: 1.2, lambda t: needed)], accel_offset=-0.25)
+    samples = [r.sample for t, r in results if r.sample is not None and r.sample.braking and t > free_rolling_s + 1.0]
+    assert samples and _disagreements(results, 0.0) == 0
+    if free_rolling_s > 1.0:
+        assert fe.brake_gain_factor == pytest.approx(1.0, abs=0.05)   # (the pressure is set for 25 m/s)
+        assert all(s.brake_gain_doubt == 0.0 for s in samples)
+    else:
+        # (learnt from the body alone it heads for (1.2 + 0.25) / 1.2 = 1.21: 1.18 by now)
+        assert abs(fe.brake_gain_factor - 1.0) < 0.1
+        assert all(0.1 < s.brake_gain_doubt <= 0.25 for s in samples)

@@ -1,8 +1,10 @@
 """Randomised braking campaign (issue 21): both estimators over random stops, against targets.
 
     .venv/bin/python benchmarks/campaign.py [--stops 1000] [--set held-out|dev|both] [--workers N]
-        [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--clean-sensors] [--save FILE.json|.parquet] [--worst 15]
-    .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--clean-sensors] [--write-log DIR]
+        [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--clean-sensors] [--pre-roll S]
+        [--save FILE.json|.parquet] [--worst 15]
+    .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--clean-sensors] [--pre-roll S]
+        [--write-log DIR]
 
 Each stop is drawn from its seed (`frictiond.campaign.draw`, ranges in its docstring): a car,
 tyres (Burckhardt or Magic Formula, never the estimator's LuGre), an ABS family, sensors and a
@@ -12,7 +14,10 @@ run in chunks on the embedded local Dask cluster (`frictiond.fleet.cluster.open_
 Development seeds are 0…N−1, held-out seeds 1,000,000…: tune on dev, report held-out.
 `--clean-sensors` runs the same stops with their sensors' imperfections taken off (no noise,
 jitter, loss, offsets or pressure lag; `draw.clean`): another simulator's signals may be that
-clean, and what the noise kept from VALID is then judged too.
+clean, and what the noise kept from VALID is then judged too. `--pre-roll S` brakes every stop S
+seconds after the start instead of 0.8–1.2 s (`draw.with_pre_roll`; a change of road stays where it
+was along the braking distance): the front end then has had little or no free rolling to learn
+the accelerometer's offset from, as after a start-up just before a stop.
 Printed: the issue's targets with PASS/FAIL per estimator, the comparison, a table per family,
 distributions, and the worst stops each with the command that reproduces it.
 """
@@ -32,8 +37,9 @@ from frictiond.campaign.score import score_stop
 from frictiond.campaign.simulate import simulate_stop
 
 
-def reproduce(seed: int, family: str | None, directory: str | None, clean_sensors: bool = False) -> int:
-    spec = draw_stop(seed, family, clean_sensors)
+def reproduce(seed: int, family: str | None, directory: str | None, clean_sensors: bool = False,
+              pre_roll_s: float | None = None) -> int:
+    spec = draw_stop(seed, family, clean_sensors, pre_roll_s)
     stop = simulate_stop(spec)
     row = score_stop(stop)
     print(f"seed {seed}: {spec.family}, surfaces {spec.surface_labels}, {spec.speed0_mps * 3.6:.0f} km/h, "
@@ -70,14 +76,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--family", default=None, help="force ABS[/TYRE[/MANOEUVRE]] (prefixes, * for any)")
     parser.add_argument("--clean-sensors", action="store_true", help="the same stops without noise, jitter, "
                         "frame loss, offsets or pressure lag")
+    parser.add_argument("--pre-roll", type=float, default=None, metavar="S", help="brake every stop S seconds "
+                        "after the start (default: drawn, 0.8-1.2 s)")
     parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
     parser.add_argument("--worst", type=int, default=15)
     parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
     parser.add_argument("--write-log", default=None, metavar="DIR", help="with --reproduce: write log, DBC, "
                         "configs, truth CSV")
     args = parser.parse_args(argv)
+    if args.pre_roll is not None and not args.pre_roll >= 0.0:
+        parser.error(f"--pre-roll must be ≥ 0, not {args.pre_roll}")
     if args.reproduce is not None:
-        return reproduce(args.reproduce, args.family, args.write_log, args.clean_sensors)
+        return reproduce(args.reproduce, args.family, args.write_log, args.clean_sensors, args.pre_roll)
     sets = ("dev", "held-out") if args.which == "both" else (args.which,)
     all_rows = []
     for which in sets:
@@ -85,20 +95,21 @@ def main(argv: list[str] | None = None) -> int:
         started = time.perf_counter()
         rows = run_campaign(seeds, workers=args.workers, chunk=args.chunk, family=args.family,
                             scheduler=args.scheduler, progress=progress_printer(which, started),
-                            clean_sensors=args.clean_sensors)
+                            clean_sensors=args.clean_sensors, pre_roll_s=args.pre_roll)
         wall = time.perf_counter() - started
         cpu = sum(r.get("sim_cpu_s", 0.0) + r.get("lugre_cpu_s", 0.0) + r.get("rls_cpu_s", 0.0) for r in rows)
         print(f"\n##### {which} seeds {seeds[0]}…{seeds[-1]}: {len(rows)} stops in {wall:.0f} s wall "
               f"({args.workers if args.workers is not None else os.cpu_count()} workers; CPU per stop "
               f"{cpu / max(len(rows), 1):.2f} s: simulation + both estimators)\n")
-        title = f"{which} seeds" + (", clean sensors" if args.clean_sensors else "")
-        print(full_report(rows, title, args.worst, args.family, args.clean_sensors))
+        title = (f"{which} seeds" + (", clean sensors" if args.clean_sensors else "")
+                 + (f", braked {args.pre_roll:g} s after the start" if args.pre_roll is not None else ""))
+        print(full_report(rows, title, args.worst, args.family, args.clean_sensors, args.pre_roll))
         for r in rows:
             r["set"] = which
         all_rows.extend(rows)
     if args.save:
         save_rows(all_rows, args.save, {"stops": args.stops, "sets": list(sets), "family": args.family,
-                                        "clean_sensors": args.clean_sensors})
+                                        "clean_sensors": args.clean_sensors, "pre_roll_s": args.pre_roll})
         print(f"\nsaved {len(all_rows)} rows to {args.save}")
     return 0
 

@@ -324,3 +324,17 @@ def test_the_reproduce_command_runs_a_clean_sensors_stop(capsys):
     assert clean[0].split(" km/h")[0] == noisy[0].split(" km/h")[0] and clean[1:] != noisy[1:]
     assert reproduce_command({"seed": 1000002}, None, clean_sensors=True).startswith(
         "python benchmarks/campaign.py --reproduce 1000002 --clean-sensors ")
+
+
+def test_a_stop_braked_soon_after_the_start_is_the_same_stop_braked_earlier():
+    spec = draw_stop(3, "*/*/jump")
+    early = draw_stop(3, "*/*/jump", pre_roll_s=0.1)
+    assert dataclasses.replace(spec, pre_roll_s=early.pre_roll_s, jump_at_m=early.jump_at_m) == early
+    assert spec.pre_roll_s > 0.7 and early.pre_roll_s == 0.1
+    # the change of road as far along the braking distance as before
+    assert early.jump_at_m - early.speed0_mps * 0.1 == pytest.approx(spec.jump_at_m - spec.speed0_mps * spec.pre_roll_s)
+    onset = [r["time_s"] for r in simulate_stop(early).truth if r["braking"] > 0.5][0]
+    assert 0.1 <= onset < 0.15
+    with pytest.raises(ValueError, match="pre_roll_s"):
+        draw_stop(3, pre_roll_s=-1.0)
+    assert " --pre-roll 0.1 " in reproduce_command({"seed": 3}, None, pre_roll_s=0.1)

@@ -43,7 +43,8 @@ Manoeuvres: "straight" 35 %, "jump" 20 % (dry→wet, wet→dry or any→ice, at 
 stopping distance, front axle first), "split" 15 % (a high-μ side and a low-μ side), "cornering"
 15 % (a_y 1.5–4 m/s² at the start, ≤ 0.35 μ g, on a constant radius), "release" 15 % (the driver
 releases 0.8–2.0 s into the stop for 0.3–0.8 s and brakes again)
-- initial speed 20–160 km/h; 0.8–1.2 s of free rolling first; braking for at most 8 s (14 s
+- initial speed 20–160 km/h; 0.8–1.2 s of free rolling first (`pre_roll_s` sets it: the front end
+  learns the accelerometer's offset while rolling free); braking for at most 8 s (14 s
   without ABS; then the driver releases), 0.3 s recorded after standstill, 0.5 s after a release
 
 Sensors (see sensors.py)
@@ -280,10 +281,12 @@ def _apply_family(choices: list[str], family: str | None) -> list[str]:
     return [_match(c, o, w) for c, o, w in zip(choices, options, parts)]
 
 
-def draw_stop(seed: int, family: str | None = None, clean_sensors: bool = False) -> StopSpec:
+def draw_stop(seed: int, family: str | None = None, clean_sensors: bool = False,
+              pre_roll_s: float | None = None) -> StopSpec:
     """The stop of `seed`. `family`: "ABS[/TYRE[/MANOEUVRE]]", each part a prefix of one of
     `ABS_FAMILIES`, `TYRE_FAMILIES`, `MANOEUVRES` or "*" (e.g. "c", "a/magic", "*/*/split").
-    `clean_sensors`: the same stop with its sensors' imperfections taken off (`clean`)."""
+    `clean_sensors`: the same stop with its sensors' imperfections taken off (`clean`).
+    `pre_roll_s`: the same stop braked this soon after the start (`with_pre_roll`)."""
     streams = [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(6)]
     pick, car_rng, tyre_rng, abs_rng, sensor_rng, drive_rng = streams
     choices = [_pick(pick, ABS_FAMILIES, (27, 27, 27, 19)), _pick(pick, TYRE_FAMILIES, (1, 1)),
@@ -300,10 +303,22 @@ def draw_stop(seed: int, family: str | None = None, clean_sensors: bool = False)
     sensors = _draw_sensors(sensor_rng)
     if clean_sensors:
         sensors = clean(sensors)
-    return _draw_drive(drive_rng, StopSpec(
+    spec = _draw_drive(drive_rng, StopSpec(
         seed=int(seed), abs_family=abs_family, tyre_family=tyre_family, manoeuvre=manoeuvre, car=car,
         surfaces=surfaces, relaxation_m=relaxation, sensors=sensors, abs_params=abs_params,
         abs_cycle_s=abs_cycle, abs_cutout_mps=cutout, jump_kind=jump_kind))
+    return spec if pre_roll_s is None else with_pre_roll(spec, pre_roll_s)
+
+
+def with_pre_roll(spec: StopSpec, pre_roll_s: float) -> StopSpec:
+    """The same stop with the brake applied `pre_roll_s` after the start instead of 0.8–1.2 s: the
+    front end has had that little free rolling to learn the accelerometer's offset (another
+    simulator, or a daemon started just before a stop, may give it none). A change of road stays
+    where it was along the braking distance."""
+    if not pre_roll_s >= 0.0:
+        raise ValueError(f"pre_roll_s must be ≥ 0, not {pre_roll_s}")
+    jump = None if spec.jump_at_m is None else spec.jump_at_m - spec.speed0_mps * (spec.pre_roll_s - pre_roll_s)
+    return replace(spec, pre_roll_s=float(pre_roll_s), jump_at_m=jump)
 
 
 def _draw_drive(rng: np.random.Generator, spec: StopSpec) -> StopSpec:

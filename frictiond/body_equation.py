@@ -92,6 +92,11 @@ class BodyEquation:
         return self._brake_gain_doubt
 
     @property
+    def accel_offset_doubt_mps2(self) -> float:
+        """The standard error of the accelerometer offset learnt so far (m/s²): 0 once learnt."""
+        return offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2) / math.sqrt(3.0)
+
+    @property
     def wheel_torques_unknown(self) -> bool:
         """Whether no wheel's brake torque is known: the car sends one master-cylinder pressure
         for all wheels, and an ABS has released wheels in this stop (`_brake_released`)."""

@@ -50,6 +50,9 @@ class PhysicalSample:
     # How far the brake gain (and so every wheel's μ) may still be off, as a share: what the gain
     # limits and the body equation leave open while the accelerometer's offset is unlearnt; else 0.
     brake_gain_doubt: float = 0.0
+    # ... and the accelerometer's offset (σ, m/s²) while free rolling has not yet taught it; else 0.
+    # A speed estimate coasting on the accelerometer drifts by that much per second.
+    accel_offset_doubt_mps2: float = 0.0
     # Share of input frames of about the last second rejected or repaired as implausible
     # (`plausibility.InputGate.suspect_share`): corruption that may have got through.
     input_suspect_share: float = 0.0

@@ -4,7 +4,10 @@ Each slip is measured against the front end's speed estimate. Where two wheels r
 a reference speed is fresh or no brake is on, the estimate is anchored to the ground's speed.
 Under an ABS that holds every wheel in slip (a slip controller) it coasts on the accelerometer,
 and its error grows with the error of the accelerometer's learnt offset (σ ≈ 0.02 m/s²: median
-0.014, p90 0.036 over the development campaign's stops).
+0.014, p90 0.036 over the development campaign's stops), or, while free rolling has not yet
+taught the offset, with what is not yet known of it (`PhysicalSample.accel_offset_doubt_mps2`:
+a slip controller's stop braked 0.15 s after the start coasted on an offset 0.115 m/s² off, and
+its held slips' drift passed for a plateau, 21 % low).
 """
 from __future__ import annotations
 
@@ -32,11 +35,13 @@ class SpeedErrorBound:
         self.options = options
         self._anchor_s = -float("inf")
         self._speeds: deque[tuple[float, float]] = deque()   # (time, speed) over the window
+        self._drift_mps2 = options.drift_mps2                 # the newest sample's (`follow`)
 
     def follow(self, sample: PhysicalSample) -> None:
         o = self.options
         t = sample.time_s
         slips = sample.slip
+        self._drift_mps2 = max(o.drift_mps2, sample.accel_offset_doubt_mps2)
         # (Started while braking: its error then is taken as the anchored one.)
         if (sample.speed_from_reference or not sample.braking or self._anchor_s == -float("inf")
                 or sorted(slips)[1] <= o.anchor_slip):
@@ -60,8 +65,9 @@ class SpeedErrorBound:
         speeds = self._speeds
         if not speeds:
             return 0.0
-        error = o.error_mps + o.drift_mps2 * max(0.0, now_s - self._anchor_s)
+        drift = self._drift_mps2
+        error = o.error_mps + drift * max(0.0, now_s - self._anchor_s)
         v = max(speed, 1.0)
         change = abs(speeds[0][1] - speeds[-1][1])
         span = speeds[-1][0] - speeds[0][0]
-        return error * change / (v * v) + o.drift_mps2 * span / v
+        return error * change / (v * v) + drift * span / v

@@ -919,3 +919,21 @@ def test_a_brake_gain_the_body_equation_leaves_in_doubt_is_no_valid():
         statuses = [est.update(dataclasses.replace(s, brake_gain_doubt=doubt)).status
                     for s in braking(lambda t, i: (mu_fn, lam_fn), duration=2.0, noise=0.01)]
         assert (Status.VALID in statuses) == valid_expected, doubt
+
+
+def test_an_accelerometer_offset_not_yet_learnt_lets_the_speed_estimate_drift_faster():
+    # Coasting on the accelerometer, the speed estimate drifts at its offset's error: 0.02 m/s²
+    # once free rolling has taught it, what the front end says is not yet known of it before.
+    from frictiond.speed_error import SpeedErrorBound, SpeedErrorOptions
+
+    spreads = {}
+    for doubt in (0.0, 0.01, 0.1):
+        bound = SpeedErrorBound(SpeedErrorOptions(0.05, 0.02, 0.02, 0.3))
+        for k in range(200):     # 2 s of braking, every wheel held at 8 % slip, slowing 3 m/s²
+            t = 0.01 * k
+            bound.follow(PhysicalSample(t, 20.0 - 3.0 * t, (0.08,) * 4, (0.3,) * 4, (4e3,) * 4, (1.2e3,) * 4,
+                                        (True,) * 4, braking=True, accel_offset_doubt_mps2=doubt))
+        spreads[doubt] = bound.slip_spread(1.99, 20.0 - 3.0 * 1.99)
+    assert spreads[0.01] == spreads[0.0] > 0.0          # (below the learnt offset's own 0.02)
+    # (the error e = 0.05 + drift · 2 s, spreading a held slip by e·Δv/v² + drift·Δt/v)
+    assert spreads[0.1] > 3.5 * spreads[0.0]

@@ -42,7 +42,8 @@ def test_the_front_end_says_the_same_on_both_paths(scenario, seed, spike_thresho
         assert (a.sample is None) == (b.sample is None) and a.fault == b.fault and a.dead_wheels == b.dead_wheels
         if a.sample is not None:
             samples += 1
-            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n", "brake_gain_doubt"):
+            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n", "brake_gain_doubt",
+                          "accel_offset_doubt_mps2"):
                 np.testing.assert_allclose(getattr(a.sample, field), getattr(b.sample, field), rtol=1e-9, atol=1e-12)
             assert a.sample.usable == b.sample.usable and a.sample.abs_active == b.sample.abs_active
             assert (a.sample.slip_spread is None) == (b.sample.slip_spread is None)
@@ -313,7 +314,8 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
             from_ref += a.sample.speed_from_reference
             dead += bool(a.dead_wheels)
             doubted += a.sample.brake_gain_doubt > 0.0
-            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n", "brake_gain_doubt"):
+            for field in ("time_s", "speed_mps", "slip", "mu_used", "normal_force_n", "tyre_force_n", "brake_gain_doubt",
+                          "accel_offset_doubt_mps2"):
                 np.testing.assert_allclose(getattr(a.sample, field), getattr(b.sample, field), rtol=1e-12, atol=1e-12)
             assert (a.sample.usable, a.sample.braking, a.sample.speed_from_reference) == \
                    (b.sample.usable, b.sample.braking, b.sample.speed_from_reference)

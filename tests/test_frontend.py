@@ -896,8 +896,9 @@ def test_an_accelerometer_offset_not_yet_learnt_is_not_taken_for_strong_brakes(c
     assert samples and _disagreements(results, 0.0) == 0
     if free_rolling_s > 1.0:
         assert fe.brake_gain_factor == pytest.approx(1.0, abs=0.05)   # (the pressure is set for 25 m/s)
-        assert all(s.brake_gain_doubt == 0.0 for s in samples)
+        assert all(s.brake_gain_doubt == 0.0 == s.accel_offset_doubt_mps2 for s in samples)
     else:
         # (learnt from the body alone it heads for (1.2 + 0.25) / 1.2 = 1.21: 1.18 by now)
         assert abs(fe.brake_gain_factor - 1.0) < 0.1
         assert all(0.1 < s.brake_gain_doubt <= 0.25 for s in samples)
+        assert all(s.accel_offset_doubt_mps2 == pytest.approx(0.3 / math.sqrt(3.0)) for s in samples)

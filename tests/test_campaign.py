@@ -61,6 +61,7 @@ def test_draws_stay_in_their_documented_ranges():
         assert 0.8 <= car.brake_gain_rear / car.config_brake_gain_rear <= 1.2
         assert 20 / 3.6 - 1e-9 <= s.speed0_mps <= 160 / 3.6
         assert s.sensors.wheel_hz in (50, 83, 100) and 0.01 <= s.sensors.wheel_resolution_kmh <= 0.0625
+        assert 0.85 <= s.lateral_capacity <= 1.10
         for curve in s.surfaces:
             assert curve.kind in ("burckhardt", "magic-formula")   # never LuGre
             if curve.kind == "magic-formula":
@@ -114,6 +115,27 @@ def test_slip_control_abs_holds_just_below_the_peak(seed):
     util = np.abs(stop.trace.fx[sel]) / (stop.trace.mu_max[sel] * stop.trace.fz[sel])
     assert np.quantile(slip, 0.99) <= 0.16
     assert np.quantile(util.max(axis=1), 0.5) > 0.9       # most of the stop near the peak
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+def test_a_turn_leaves_each_tyre_the_longitudinal_grip_the_friction_ellipse_allows(seed):
+    # Braking in a turn, each tyre carries a_y/g of its load sideways against a lateral grip of
+    # `lateral_capacity` × its peak; what is left to braking is √(1 − u²) of its curve: the
+    # wheels reach that lowered peak, and no tyre gives more.
+    spec = dataclasses.replace(draw_stop(seed, "a/burckhardt/cornering"), lateral_capacity=0.9)
+    stop = simulate_stop(spec, keep_trace=True)
+    tr, sel = stop.trace, fast_braking(stop)
+    expected_use = np.abs(tr.ay)[:, None] / (9.81 * 0.9 * tr.mu_max)
+    assert tr.lateral_use[sel] == pytest.approx(np.minimum(expected_use[sel], 0.95), rel=1e-3)
+    assert tr.lateral_use[sel].max() > 0.2                 # (the premise: the turn takes a real share)
+    longitudinal = np.abs(tr.fx[sel]) / (tr.mu_max[sel] * tr.fz[sel])
+    left = np.sqrt(1.0 - tr.lateral_use[sel] ** 2)
+    assert (longitudinal <= 1.02 * left).all()
+    at_limit = longitudinal / left > 0.97
+    assert at_limit.any() and (longitudinal[at_limit] < 0.97).any()   # (where the plain peak is not reached)
+    # the truth's utilisation is the ellipse's: near 1 where the wheels work at their limit
+    truth_util = np.array([[r[f"utilisation_{w}"] for w in ("fl", "fr", "rl", "rr")] for r in stop.truth])
+    assert truth_util.max() > 0.95
 
 
 @pytest.mark.parametrize("seed", [0, 1, 4, 5])

@@ -821,10 +821,11 @@ def test_a_peak_first_shown_at_walking_pace_is_no_evidence():
     # Campaign seed 2594: a slip controller holds 66 % of a wet Magic Formula tyre's grip all
     # stop long; at its cut-out the wheels lock, and at 3.2 m/s a wheel's slips looked like a
     # peak. The published 0.47 (truth 0.69) was VALID to the stop; no peak was ever shown at a
-    # speed where slip means something, so no VALID at all.
+    # speed where slip means something, so no VALID at all. (It is a turn: with the lateral
+    # force's share, the tyres used at most 81 % of their grip.)
     stop, estimates = campaign_stop_estimates(2594)
     assert max(max(r[f"utilisation_{w}"] for w in ("fl", "fr", "rl", "rr")) for r in stop.truth
-               if r["braking"] and r["speed_mps"] > 5.0) < 0.8
+               if r["braking"] and r["speed_mps"] > 5.0) < 0.82
     assert estimates and not [e for e in estimates if e.status == Status.VALID]
 
 

@@ -43,6 +43,8 @@ Manoeuvres: "straight" 35 %, "jump" 20 % (dry→wet, wet→dry or any→ice, at 
 stopping distance, front axle first), "split" 15 % (a high-μ side and a low-μ side), "cornering"
 15 % (a_y 1.5–4 m/s² at the start, ≤ 0.35 μ g, on a constant radius), "release" 15 % (the driver
 releases 0.8–2.0 s into the stop for 0.3–0.8 s and brakes again)
+- combined slip in a turn: the lateral force the curve needs lowers each tyre's longitudinal curve
+  by the friction ellipse, lateral grip 0.85–1.10 × the longitudinal (see simulate.py)
 - initial speed 20–160 km/h; 0.8–1.2 s of free rolling first (`pre_roll_s` sets it: the front end
   learns the accelerometer's offset while rolling free); braking for at most 8 s (14 s
   without ABS; then the driver releases), 0.3 s recorded after standstill, 0.5 s after a release
@@ -101,6 +103,8 @@ class StopSpec:
     jump_at_m: float | None = None
     jump_kind: str = ""
     turn_radius_m: float = 0.0          # 0: straight ahead; > 0 a left turn
+    # The tyres' lateral grip over their longitudinal grip: the friction ellipse's other axis.
+    lateral_capacity: float = 1.0
     release_at_s: float | None = None   # after the brake onset
     release_for_s: float = 0.0
     dt_s: float = 0.001
@@ -346,4 +350,6 @@ def _draw_drive(rng: np.random.Generator, spec: StopSpec) -> StopSpec:
         changes["turn_radius_m"] = v0 ** 2 / min(a_y0, 0.35 * mu_low * GRAVITY_MPS2)
     elif spec.manoeuvre == "release":
         changes.update(release_at_s=float(np.clip(release_frac * stop_s, 0.4, 2.0)), release_for_s=release_for)
+    # (drawn last, and for every stop: the draws above stay what each seed drew before)
+    changes["lateral_capacity"] = rng.uniform(0.85, 1.10)
     return replace(spec, **changes)

@@ -6,8 +6,9 @@ beyond them: FAULT outputs, a crash of the pipeline (recorded, never raised), an
 calibration counts — VALID outputs with confidence ≥ c, and how many of them are within 10 % of
 the truth, for c in `CALIBRATION_LEVELS` (summed over stops by the report) — and the braking time
 the estimator kept from VALID, by its reason (`not_valid`).
-Per stop, from the truth: the highest utilisation |F_x| / (μ_max F_z) any wheel reached while
-braking 1 m/s above the ABS cut-out speed (`max_utilisation`): a stop that stayed below 0.8
+Per stop, from the truth: the highest utilisation any wheel reached while braking 1 m/s above
+the ABS cut-out speed (`max_utilisation`; |F_x| / (μ_max F_z), with in a turn the lateral force's
+share of the tyre's lateral grip added by the friction ellipse): a stop that stayed below 0.8
 never showed the peak.
 """
 from __future__ import annotations

@@ -6,7 +6,9 @@ columns `frictiond.evaluation` reads, plus per-wheel forces, loads and utilisati
 `config(kind)`, the frictiond config of the car as configured.
 
 Integration: per 1 ms step the driver's pedal, the ABS (on its own cycle), the hydraulics (rate
-limited), load transfer (pitch-lagged a_x, lateral from the curve), then each wheel by
+limited), load transfer (pitch-lagged a_x, lateral from the curve), the lateral force the curve
+needs (each tyre's share in proportion to its load, which lowers its longitudinal curve by the
+friction ellipse: `lateral_use`), then each wheel by
 linearly implicit Euler — the tyre's slope dF/dω enters the step's denominator where it
 stabilises (below the peak), so a stiff tyre at low speed does not need a smaller step — with
 the optional relaxation lag integrated in the same implicit step; then the body.
@@ -36,6 +38,9 @@ TRUTH_EVERY = 10                 # truth rows every 10 steps (10 ms at 1 kHz)
 V_EPS_MPS = 1.0                  # slip's denominator floor for the force (regularised near standstill)
 STANDSTILL_MPS = 0.05
 RELAXATION_MIN_SPEED_MPS = 5.0  # the relaxation time σ/v is σ/5 m/s at most
+# The path is prescribed: where a turn would ask more of a tyre than its grip, it is held at this
+# share of its lateral grip (a real car would run wide instead).
+MAX_LATERAL_USE = 0.95
 BRAKING_MIN_SPEED_MPS = 0.5      # `braking` in the truth: pedal applied and the car still rolling
 AFTER_STOP_S = 0.3
 AFTER_RELEASE_S = 0.5
@@ -64,6 +69,7 @@ class Trace:
     slip_at_mu_max: np.ndarray
     abs_active: np.ndarray
     braking: np.ndarray
+    lateral_use: np.ndarray      # F_y / (lateral grip · F_z) per wheel
 
 
 @dataclass
@@ -178,8 +184,23 @@ class _Integrator:
         half = 0.5 * self.car.track_m
         return [self.v - yaw * half, self.v + yaw * half] * 2, self.v * yaw, yaw
 
-    def step_wheels(self, ground: list[float], fz: list[float], surfaces: list[int]) -> list[float]:
-        """Linearly implicit Euler per wheel; returns ω̇. Updates ω and the tyre forces."""
+    def lateral_use(self, ground: list[float], ay: float, surfaces: list[int]) -> list[float]:
+        """Each tyre's lateral force over its lateral grip. The tyres carry m·a_y in proportion
+        to their loads, so each carries a_y/g of its load, against a lateral grip of
+        `lateral_capacity` × its longitudinal peak at its speed."""
+        if ay == 0.0:
+            return [0.0] * 4
+        need = abs(ay) / GRAVITY_MPS2
+        grip = [self.spec.lateral_capacity * self.peaks[s][0] * self.speed_factor[s](g)
+                for g, s in zip(ground, surfaces)]
+        return [min(need / max(c, 1e-6), MAX_LATERAL_USE) for c in grip]
+
+    def step_wheels(self, ground: list[float], fz: list[float], surfaces: list[int],
+                    lateral_use: list[float]) -> list[float]:
+        """Linearly implicit Euler per wheel; returns ω̇. Updates ω and the tyre forces.
+
+        Combined slip by the friction ellipse: a tyre using the share u of its lateral grip has
+        √(1 − u²) of its longitudinal curve left, at every slip."""
         car, dt = self.car, self.dt
         r, j = car.wheel_radius_m, car.wheel_inertia_kgm2
         gains = car.gains()
@@ -190,6 +211,8 @@ class _Integrator:
             den = max(g, r * w, V_EPS_MPS)
             lam = (g - r * w) / den
             mu, dmu = self.models[surfaces[i]](lam, g)
+            left = math.sqrt(1.0 - lateral_use[i] ** 2)
+            mu, dmu = mu * left, dmu * left
             f_ss = mu * fz[i]
             k = fz[i] * dmu * (-r / den)                  # dF/dω
             # σ/v grows without bound towards standstill; real tyres stop relaxing there (the
@@ -211,7 +234,7 @@ class _Integrator:
             if relax > 0.0:
                 # The lag is the carcass's; the patch still slides at the road's limit (a wheel
                 # that runs onto ice loses its force at once, not over σ of travel).
-                limit = self.peaks[surfaces[i]][0] * self.speed_factor[surfaces[i]](g) * fz[i]
+                limit = self.peaks[surfaces[i]][0] * self.speed_factor[surfaces[i]](g) * fz[i] * left
                 force = min(max(force, -limit), limit)
             self.force[i] = force
             self.omega[i] = w_new
@@ -238,11 +261,12 @@ class _Integrator:
             self.step_driver(t)
             self.step_hydraulics(k, t, ground, slip, [self.peaks[s][1] for s in surfaces])
             fz = normal_loads(self.car, self.ax_lagged, ay)
-            omega_dot = self.step_wheels(ground, fz, surfaces)
+            lateral = self.lateral_use(ground, ay, surfaces)
+            omega_dot = self.step_wheels(ground, fz, surfaces, lateral)
             braking = 1.0 if self.driver > 1.0 and self.v > BRAKING_MIN_SPEED_MPS else 0.0
             self.rows.append((t, self.v, self.x, self.ax, ay, yaw, self.driver, braking, *self.omega, *omega_dot,
                               *self.pressure, *self.force, *fz, *slip, *ground, *surfaces,
-                              *(1.0 if c.active else 0.0 for c in self.commands)))
+                              *(1.0 if c.active else 0.0 for c in self.commands), *lateral))
             self.step_body()
             self._check_end(t)
             if self.end_s is not None and t >= self.end_s:
@@ -263,7 +287,8 @@ class _Integrator:
         col = iter(range(a.shape[1]))
         one = {name: a[:, next(col)] for name in ("t", "v", "x", "ax", "ay", "yaw", "master", "braking")}
         quad = {name: a[:, [next(col) for _ in range(4)]]
-                for name in ("omega", "omega_dot", "pressure", "fx", "fz", "slip", "ground", "surface", "abs_active")}
+                for name in ("omega", "omega_dot", "pressure", "fx", "fz", "slip", "ground", "surface", "abs_active",
+                             "lateral_use")}
         surface = quad.pop("surface").astype(int)
         mu_max = np.zeros_like(quad["ground"])
         slip_at = np.zeros_like(quad["ground"])
@@ -282,7 +307,8 @@ def _slip(ground: float, rw: float) -> float:
 
 def truth_rows(trace: Trace) -> list[dict[str, float]]:
     """Every 10th step as a truth row; `mu_max` is the mean of the four wheels' peaks (the
-    road's peak on a uniform road, the mean of both sides on split-μ), as frictiond's own
+    road's peak on a uniform road, the mean of both sides on split-μ; the road's grip, of which
+    a turn leaves less to braking), as frictiond's own
     simulator writes it and `frictiond.evaluation` reads it."""
     sel = slice(0, len(trace.t), TRUTH_EVERY)
     fz = trace.fz[sel]
@@ -297,7 +323,9 @@ def truth_rows(trace: Trace) -> list[dict[str, float]]:
     per_wheel = {"slip": trace.slip[sel], "mu": mu, "mu_max": mu_max, "slip_at_mu_max": trace.slip_at_mu_max[sel],
                  "fx": trace.fx[sel], "fn": fz, "omega_dot": trace.omega_dot[sel], "wheel_speed": trace.omega[sel],
                  "ground_speed": trace.ground[sel], "brake_pressure": trace.pressure[sel],
-                 "abs": trace.abs_active[sel], "utilisation": np.abs(mu) / np.maximum(mu_max, 1e-3)}
+                 "abs": trace.abs_active[sel],
+                 # (of the friction ellipse: the longitudinal share and the lateral share together)
+                 "utilisation": np.hypot(np.abs(mu) / np.maximum(mu_max, 1e-3), trace.lateral_use[sel])}
     for name, values in per_wheel.items():
         for i, w in enumerate(WHEELS):
             cols[f"{name}_{w}"] = values[:, i]

@@ -273,6 +273,23 @@ def test_cornering_kinematics():
     assert np.mean(lat) == pytest.approx(tr["accel_lat"][0], abs=0.15)
 
 
+def test_a_turn_leaves_the_brakes_what_the_combined_slip_envelope_allows():
+    # Each tyre carries a_y/g of its load sideways; braking gets (1 − u^2.5)^(1/2.5) of its curve,
+    # u = a_y / (g μ_max): at 3.5 m/s² on dry 3 % less than straight ahead, and no more.
+    from frictiond.simulator.vehicle_sim import COMBINED_SLIP_EXPONENT
+
+    tr = run("cornering").truth
+    wheels = ("fl", "fr", "rl", "rr")
+    braking = (tr["braking"] > 0.5) & (tr["speed_mps"] > 5.0)
+    use = tr["accel_lat"][braking] / (9.81 * np.array([tr[f"mu_max_{w}"][braking] for w in wheels]))
+    left = (1.0 - use**COMBINED_SLIP_EXPONENT) ** (1.0 / COMBINED_SLIP_EXPONENT)
+    mu = np.abs(np.array([tr[f"mu_{w}"][braking] for w in wheels]))
+    peak = np.array([tr[f"mu_max_{w}"][braking] for w in wheels])
+    assert use.max() > 0.3                                # (the premise: a turn that takes a share)
+    assert (mu <= 1.01 * left * peak).all()
+    assert (mu > 0.98 * left * peak).any()
+
+
 # ------------------------------------------------------------------ sensors and bus timing
 @pytest.mark.parametrize("name", ["dry", "noisy"])
 def test_event_rates_match_schedules(name):

@@ -7,6 +7,9 @@ Integrated at 1 kHz:
   `v ∓ ψ̇ d/2` (inner = left wheels slower);
 - loads: model.md's load transfer with forward-positive `a_x`, but driven by `a_x` through a
   first-order pitch lag (50 ms), plus optional road roughness (load fluctuation per wheel);
+- combined slip: in a turn each tyre carries a_y/g of its load sideways, and what is left of its
+  curve to braking follows a super-ellipse, `(1 − u^2.5)^(1/2.5)` with u = a_y/(g μ_max) (a
+  squarer envelope than the estimator's friction circle);
 - wheels: `J dω/dt = −T_b + R F_x + T_e` (here `T_e = 0`), solved semi-implicitly in ω because the
   tyre is stiff (for the dynamic LuGre truth the step is exact for the linear-in-slip update of the
   bristle state, so the recorded force is exactly the one the wheel felt);
@@ -225,6 +228,19 @@ class _NormalLoads:
         return axle * (0.5 + _SIDE * h * ay / (self._track * g)) * (1.0 + roughness)
 
 
+COMBINED_SLIP_EXPONENT = 2.5
+MAX_LATERAL_USE = 0.95   # (the path is prescribed: a turn asking more of a tyre holds it here)
+
+
+def _longitudinal_share(tyre, ground: np.ndarray, ay: float) -> np.ndarray:
+    """What a turn leaves of each tyre's longitudinal curve (1 straight ahead)."""
+    if ay == 0.0:
+        return np.ones(4)
+    use = np.minimum(abs(ay) / (GRAVITY_MPS2 * np.maximum(tyre.mu_max(ground), 1e-6)), MAX_LATERAL_USE)
+    n = COMBINED_SLIP_EXPONENT
+    return (1.0 - use**n) ** (1.0 / n)
+
+
 def _turn(v: float, curve_radius_m: float | None) -> tuple[float, float]:
     """Yaw rate and lateral acceleration in a constant-radius (left) turn; none on a straight."""
     if curve_radius_m:
@@ -271,11 +287,12 @@ def run_dynamics(scn: Scenario, vehicle: VehicleParams, family: str, rng: np.ran
         ground = v + _SIDE * yaw * half_track
         pd, tb = brakes.step(k, t, omega, ground, ax)
         fn = normal_loads(a_lag, ay, rough[k])
-        # tyre + wheel, semi-implicit in omega
+        # tyre + wheel, semi-implicit in omega; in a turn on the load a turn leaves to braking
+        fn_braking = fn * _longitudinal_share(surfaces.tyre, ground, ay) if ay else fn
         if dyn:
-            omega_new, fx, z = _wheels_on_dynamic_lugre(surfaces.tyre, ground, omega, z, fn, tb, R, J)
+            omega_new, fx, z = _wheels_on_dynamic_lugre(surfaces.tyre, ground, omega, z, fn_braking, tb, R, J)
         else:
-            omega_new, fx = _wheels_on_static_curve(surfaces.tyre, ground, omega, fn, tb, R, J)
+            omega_new, fx = _wheels_on_static_curve(surfaces.tyre, ground, omega, fn_braking, tb, R, J)
         omega_dot = (omega_new - omega) / DT_S
         # body
         ax = (-float(np.sum(fx)) - veh.rolling_resistance * v - veh.drag_area_coefficient * v * v) / M

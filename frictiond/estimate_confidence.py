@@ -246,11 +246,12 @@ class EstimateConfidence:
         # independent truths the error is 4–6 times that spread, 4 with wheel speeds at 50 Hz and
         # 6 at 100 Hz: √(`evidence_interval_s` / sample period).
         # The brake gain's doubt scales every wheel's μ alike, so μ_max too: uniform over its
-        # half-width d, a σ of d/√3 (0 once the accelerometer's offset is learnt).
+        # half-width d, a σ of d/√3 (0 once the accelerometer's offset is learnt). So does the
+        # share of μ_max the lateral μ's tolerance could take off in a turn (`_with_lateral_grip`).
         spread2 = (self._variance_inflation * rel_std * rel_std + drift**2 + o.model_mismatch**2
                    + (o.misfit_peak_ratio * self._data_above_fit)**2
                    + (o.spread_loss_weight * self._peak_spread_loss)**2
-                   + self._brake_gain_doubt**2 / 3.0)
+                   + self._brake_gain_doubt**2 / 3.0 + self._lateral_doubt**2 / 3.0)
         ramp = min(1.0, (now_s - self._excited_since_s) / o.settle_s) if o.settle_s > 0 else 1.0
         # Newest residuals biased beyond the noise, of all wheels or of the front ones (which
         # meet a new road first): the road may be changing under the fit.

@@ -65,6 +65,8 @@ class EstimateReport:
             self._data_above_fit = self._excess_over_fit(fitted_mu, wheel_mu, wheel_lam)
         excitation = self._excitation_cache
         wheel_mu, mu_max = self._lifted_to_bands(fitted_mu, wheel_mu, mu_max)
+        longitudinal_mu = wheel_mu
+        wheel_mu, mu_max = self._with_lateral_grip(wheel_mu, mu_max)
         confidence = self._confidence(now_s, mu_max, mu_std, excitation)
         theta_mean = sum(theta_list) / N_WHEELS
         detail = {"excitation": excitation, "variance_factor": variance_factor, "samples": float(samples),
@@ -73,7 +75,7 @@ class EstimateReport:
                   "jumps": float(self._jumps)}
         detail.update(zip(_WHEEL_STD_KEYS, map(float, wheel_std)))
         if excitation > 0:
-            self._balance_axles(now_s, wheel_mu)
+            self._balance_axles(now_s, longitudinal_mu)
         return self._decided(now_s, speed, excitation, confidence,
                              (mu_max, slip_star, theta_mean, wheel_mu, mu_std, detail))
 
@@ -182,6 +184,28 @@ class EstimateReport:
             return wheel_mu, mu_max
         wheel_mu = tuple(max(m, f * ratio) for m, f in zip(wheel_mu, fitted_mu))
         return wheel_mu, max(mu_max, sum(share * m for share, m in zip(self._load_share, wheel_mu)))
+
+    def _with_lateral_grip(self, wheel_mu: tuple, mu_max: float) -> tuple[tuple, float]:
+        """The wheels' longitudinal peaks and μ_max as the road's grip: with the tyres carrying the
+        lateral μ of a turn as well, √(μ_x² + μ_y²) each (the friction circle; a tyre whose
+        lateral grip differs from its longitudinal one, an ellipse, is left to the model's
+        mismatch). Sets `_lateral_doubt`: the half-width, as a share of μ_max, of what the lateral
+        μ within ± `lateral_mu_tolerance` makes of μ_max."""
+        o = self.options
+        lateral = self._lateral_mu
+        if not o.lateral_grip or lateral <= 0.0 or mu_max <= 0.0:
+            self._lateral_doubt = 0.0
+            return wheel_mu, mu_max
+        share = self._load_share
+
+        def road(lat: float) -> float:
+            return sum(s * math.hypot(m, lat) for s, m in zip(share, wheel_mu))
+
+        low, high = road(max(lateral - o.lateral_mu_tolerance, 0.0)), road(lateral + o.lateral_mu_tolerance)
+        wheel_mu = tuple(math.hypot(m, lateral) for m in wheel_mu)
+        mu_max = sum(s * m for s, m in zip(share, wheel_mu))
+        self._lateral_doubt = 0.5 * (high - low) / mu_max
+        return wheel_mu, mu_max
 
     def _restate(self, last: FrictionEstimate, now_s: float) -> FrictionEstimate:
         """The last (CONVERGING) fit again, at a cycle without usable samples.

@@ -176,6 +176,13 @@ class LugreTROptions:
     body_floor_margin: float = 0.03       # ... less this (offset, pitch) ...
     body_floor_relative_margin: float = 0.03   # ... and this share of it
     stop_floor_tolerance: float = 0.12    # VALID needs μ_max within this share of the stop's highest body utilisation
+    # In a turn each tyre also carries the car's lateral μ (`PhysicalSample.lateral_mu`, averaged
+    # over `forgetting_time_constant`), and the longitudinal peak the data show is what is left of
+    # the road's grip: μ_max = √(μ_x² + μ_y²) (the friction circle). The lateral μ is known to
+    # within this (an accelerometer's offset, 0.3 m/s²); what that could take off μ_max counts
+    # in the confidence. (`lateral_grip` off: the longitudinal peak as it is.)
+    lateral_grip: bool = True
+    lateral_mu_tolerance: float = 0.03
     axle_balance_time_constant: float = 2.0   # s; 0 disables the front/rear brake-gain balance
     axle_balance_limit: float = 0.3
     # μ is measured as a mean over the slips a wheel swept within the derivative filter's window
@@ -473,6 +480,9 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._residual_scale = 1.0
         self._input_share = 0.0   # the newest sample's share of corrupted input (input_quality)
         self._brake_gain_doubt = 0.0   # the newest sample's `brake_gain_doubt` (`_confidence`)
+        self._lateral_mu = 0.0         # the tyres' lateral μ, averaged (`_follow_lateral`)
+        self._lateral_time_s = -math.inf
+        self._lateral_doubt = 0.0      # the share of μ_max the lateral μ's tolerance could take off
         self._load_share = [1.0 / N_WHEELS] * N_WHEELS
         self._mu_history: deque[tuple[float, float]] = deque()
         self._excitation_cache: float | None = None
@@ -580,6 +590,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._last_sample_s = t
         self._input_share = sample.input_suspect_share   # (corrupted input costs confidence: input_quality)
         self._brake_gain_doubt = sample.brake_gain_doubt
+        self._follow_lateral(t, sample.lateral_mu)
         window.drop_before(t - o.window_s, self.core)
         fresh = len(window) == 0
         v = sample.speed_mps
@@ -619,6 +630,16 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         if self._not_valid == not_valid.NOT_EXCITED:
             return not_valid.not_excited_reason(self._excitation_why)
         return self._not_valid
+
+    def _follow_lateral(self, t: float, lateral_mu: float) -> None:
+        """The tyres' lateral μ, averaged over the window's forgetting time (the accelerometer's
+        noise; in a turn at constant radius it falls with the speed, slowly)."""
+        if not lateral_mu >= 0.0 or not math.isfinite(lateral_mu):   # (NaN, a broken input: straight on)
+            lateral_mu = 0.0
+        age = t - self._lateral_time_s
+        keep = math.exp(-age / self.options.forgetting_time_constant) if age >= 0.0 else 0.0
+        self._lateral_mu = keep * self._lateral_mu + (1.0 - keep) * lateral_mu
+        self._lateral_time_s = t
 
     def _restart_after_clock_step(self, t: float) -> None:
         """The clock went backwards (log splice, clock step): the window's samples would get

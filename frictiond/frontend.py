@@ -347,6 +347,7 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
         if result.sample is not None:
             self._mark_abs_activity(result.sample)
             self._mark_body_mu(result.sample)
+            self._mark_lateral_mu(result.sample)
             result.sample.brake_gain_doubt = self._brake_gain_doubt
             result.sample.accel_offset_doubt_mps2 = self.accel_offset_doubt_mps2
             result.sample.input_suspect_share = self.gate.suspect_share()

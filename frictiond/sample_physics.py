@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from .body_equation import UNLEARNT_ACCEL_TOLERANCE_MPS2
 from .samples import FrontEndResult, PhysicalSample
 from .sensor_faults import stood_in_for
 from .speed_estimate import MAX_ABS_ACCEL_MPS2
@@ -23,6 +24,7 @@ MAX_PRESSURE_BAR = 350.0
 BODY_WHEELS_TOLERANCE = 0.25   # the body's and the wheels' total force agree within this (pad friction ±20 %)
 MIN_LOAD_N = 50.0              # a wheel carrying less has no μ worth the name (a lifted wheel)
 MIN_DRIVE_TORQUE_NM = 20.0     # a wheel driven harder than this is torqued as a braked one is
+LATERAL_OFFSET_MPS2 = UNLEARNT_ACCEL_TOLERANCE_MPS2   # (no free rolling teaches the lateral offset)
 
 # What `_frontcore.sample_physics` builds its results from: the two result types, then the
 # fault messages it can give (those of `_compute_sample`, in this order).
@@ -211,6 +213,10 @@ class SamplePhysics:
             slips.append((ground - wheel_linear[i]) / denom if denom > 0.1 else 0.0)
         return slips
 
+    def _mark_lateral_mu(self, sample: PhysicalSample) -> None:
+        """`sample.lateral_mu`: the lateral force per unit load the tyres carry (`_lateral_mu`)."""
+        sample.lateral_mu = _lateral_mu(self._value("accel_lat", sample.time_s))
+
     def _mark_body_mu(self, sample: PhysicalSample) -> None:
         """`sample.body_mu`: the car's total longitudinal tyre force over its weight, from the
         accelerometer (offset removed) less drag and rolling resistance, where the wheels' own
@@ -235,6 +241,15 @@ class SamplePhysics:
         wheels = sum(sample.tyre_force_n) / load if load > 0.0 else math.nan
         if abs(body - wheels) <= BODY_WHEELS_TOLERANCE * abs(wheels) + 0.05:
             sample.body_mu = min(body, wheels)
+
+
+def _lateral_mu(accel_lat: float | None) -> float:
+    """`PhysicalSample.lateral_mu` of a lateral acceleration: its size over g, with the offset an
+    accelerometer may read taken off in quadrature (as the estimator adds the result to the
+    longitudinal grip), so that driving straight reads 0."""
+    if accel_lat is None or not math.isfinite(accel_lat):
+        return 0.0
+    return math.sqrt(max(accel_lat * accel_lat - LATERAL_OFFSET_MPS2 ** 2, 0.0)) / GRAVITY_MPS2
 
 
 def _out_of_range(accel_long_raw: float, accel_lat: float, pressures: list[float]) -> str | None:

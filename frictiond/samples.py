@@ -47,6 +47,9 @@ class PhysicalSample:
     speed_from_reference: bool = False
     abs_active: tuple[bool, bool, bool, bool] = (False, False, False, False)   # an ABS works the wheel
     body_mu: float = float("nan")  # the car's total tyre force / weight, from its accelerometer
+    # The car's lateral acceleration over g, less what the accelerometer's offset may read: the
+    # lateral force per unit load its tyres carry, which a turn takes from their grip.
+    lateral_mu: float = 0.0
     # How far the brake gain (and so every wheel's μ) may still be off, as a share: what the gain
     # limits and the body equation leave open while the accelerometer's offset is unlearnt; else 0.
     brake_gain_doubt: float = 0.0

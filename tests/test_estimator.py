@@ -938,3 +938,41 @@ def test_an_accelerometer_offset_not_yet_learnt_lets_the_speed_estimate_drift_fa
     assert spreads[0.01] == spreads[0.0] > 0.0          # (below the learnt offset's own 0.02)
     # (the error e = 0.05 + drift · 2 s, spreading a held slip by e·Δv/v² + drift·Δt/v)
     assert spreads[0.1] > 3.5 * spreads[0.0]
+
+
+def test_a_turn_takes_the_lateral_grip_out_of_the_longitudinal_peak_and_it_is_added_back():
+    # In a turn the tyres carry the car's lateral μ too: by the friction circle the longitudinal
+    # curve the wheels show is √(1 − (μ_y/μ)²) of the road's. Reported as it is, μ_max reads that
+    # much low (here 20 %: a_y = 0.6 μ g); with the lateral μ added back it is the road's.
+    p = tm.LugreParams(theta=1.6, sigma0=230.0, v_s=5.0, sigma2=0.002)
+    mu_fn, lam_fn = lugre_curve(p)
+    road = tm.peak(10.0, p)[0]
+    lateral = 0.6 * road
+    left = math.sqrt(1.0 - 0.36)
+
+    def last_valid(lateral_grip):
+        est = LugreTrustRegionEstimator(LugreTROptions(lateral_grip=lateral_grip))
+        valid = []
+        for s in braking(lambda t, i: ((lambda lam, v: left * mu_fn(lam, v)), lam_fn), v0=14.0, noise=0.005,
+                         speed_floor=10.0):
+            e = est.update(dataclasses.replace(s, lateral_mu=lateral))
+            if e.status == Status.VALID:
+                valid.append(e.mu_max / tm.peak(s.speed_mps, p)[0])
+        assert len(valid) > 20, lateral_grip
+        return valid[-1]
+
+    assert last_valid(False) == pytest.approx(left, rel=0.05)
+    assert last_valid(True) == pytest.approx(1.0, rel=0.05)
+
+
+def test_a_lateral_mu_that_could_be_an_offset_is_doubted_on_ice():
+    # On ice a lateral μ of 0.03 (0.3 m/s²: what an accelerometer's offset may read) would add a
+    # fifth to μ_max by the friction circle. Within the lateral μ's tolerance of nothing, it is
+    # not made VALID; on dry asphalt the same lateral μ is a rounding.
+    for theta, expected in ((1.0, True), (25.0, False)):
+        p = tm.LugreParams(theta=theta, sigma0=400.0, v_s=5.0, sigma2=0.0001)
+        mu_fn, lam_fn = lugre_curve(p)
+        est = LugreTrustRegionEstimator()
+        statuses = [est.update(dataclasses.replace(s, lateral_mu=0.03)).status
+                    for s in braking(lambda t, i: (mu_fn, lam_fn), v0=15.0, noise=0.05 / theta, duration=2.0)]
+        assert (Status.VALID in statuses) == expected, theta

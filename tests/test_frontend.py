@@ -120,6 +120,21 @@ def test_lateral_acceleration_loads_the_outer_wheels():
     assert s.normal_force_n[3] > s.normal_force_n[2]
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("accel_lat", [-4.0, 0.25, 3.0])
+def test_a_sample_carries_the_lateral_mu_its_tyres_carry_less_what_an_offset_may_read(compiled, accel_lat):
+    # In a turn the tyres carry a_y/g of their load sideways (the estimator adds it to the grip
+    # they show braking); what the lateral accelerometer's offset may read (0.3 m/s²) is taken
+    # off in quadrature, so a straight road read 0.25 m/s² off carries none.
+    fe = make()
+    if not compiled:
+        fe.core = None
+    samples = [r.sample for r in feed(fe, Drive(accel_lat=accel_lat)) if r.sample is not None]
+    expected = math.sqrt(max(accel_lat**2 - 0.3**2, 0.0)) / GRAVITY_MPS2
+    assert len(samples) > 80
+    assert all(s.lateral_mu == pytest.approx(expected, abs=1e-9) for s in samples)
+
+
 def test_speed_estimate_without_reference_during_abs_like_slip():
     drive = Drive(slip=0.1)
     fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})

@@ -965,14 +965,22 @@ def test_a_turn_takes_the_lateral_grip_out_of_the_longitudinal_peak_and_it_is_ad
     assert last_valid(True) == pytest.approx(1.0, rel=0.05)
 
 
-def test_a_lateral_mu_that_could_be_an_offset_is_doubted_on_ice():
-    # On ice a lateral μ of 0.03 (0.3 m/s²: what an accelerometer's offset may read) would add a
-    # fifth to μ_max by the friction circle. Within the lateral μ's tolerance of nothing, it is
-    # not made VALID; on dry asphalt the same lateral μ is a rounding.
-    for theta, expected in ((1.0, True), (25.0, False)):
+def test_a_lateral_mu_within_its_tolerance_of_nothing_is_doubted_on_ice():
+    # What a lateral μ adds to μ_max counts in the confidence as far as a lateral μ smaller by
+    # its tolerance (0.03: an accelerometer's 0.3 m/s² offset) would not have added it. On dry
+    # asphalt a lateral μ of 0.03 is a rounding; on ice it is a sixth of μ_max, all of it within
+    # the tolerance: the confidence falls from 0.95 to below 0.8, and at 0.05 nothing is VALID.
+    def run_with(theta, lateral):
         p = tm.LugreParams(theta=theta, sigma0=400.0, v_s=5.0, sigma2=0.0001)
         mu_fn, lam_fn = lugre_curve(p)
         est = LugreTrustRegionEstimator()
-        statuses = [est.update(dataclasses.replace(s, lateral_mu=0.03)).status
-                    for s in braking(lambda t, i: (mu_fn, lam_fn), v0=15.0, noise=0.05 / theta, duration=2.0)]
-        assert (Status.VALID in statuses) == expected, theta
+        return [est.update(dataclasses.replace(s, lateral_mu=lateral))
+                for s in braking(lambda t, i: (mu_fn, lam_fn), v0=15.0, noise=0.05 / theta, duration=2.0)]
+
+    def top(estimates):
+        return max(e.confidence for e in estimates)
+
+    assert top(run_with(1.0, 0.03)) == pytest.approx(top(run_with(1.0, 0.0)), abs=0.005)
+    straight, turning = top(run_with(25.0, 0.0)), top(run_with(25.0, 0.03))
+    assert straight > 0.9 and turning < 0.8
+    assert not [e for e in run_with(25.0, 0.05) if e.status == Status.VALID]

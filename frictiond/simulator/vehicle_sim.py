@@ -234,8 +234,6 @@ MAX_LATERAL_USE = 0.95   # (the path is prescribed: a turn asking more of a tyre
 
 def _longitudinal_share(tyre, ground: np.ndarray, ay: float) -> np.ndarray:
     """What a turn leaves of each tyre's longitudinal curve (1 straight ahead)."""
-    if ay == 0.0:
-        return np.ones(4)
     use = np.minimum(abs(ay) / (GRAVITY_MPS2 * np.maximum(tyre.mu_max(ground), 1e-6)), MAX_LATERAL_USE)
     n = COMBINED_SLIP_EXPONENT
     return (1.0 - use**n) ** (1.0 / n)

@@ -62,6 +62,7 @@ def test_draws_stay_in_their_documented_ranges():
         assert 20 / 3.6 - 1e-9 <= s.speed0_mps <= 160 / 3.6
         assert s.sensors.wheel_hz in (50, 83, 100) and 0.01 <= s.sensors.wheel_resolution_kmh <= 0.0625
         assert 0.85 <= s.lateral_capacity <= 1.10
+        assert -5.0 <= s.wind_mps <= 5.0
         for curve in s.surfaces:
             assert curve.kind in ("burckhardt", "magic-formula")   # never LuGre
             if curve.kind == "magic-formula":
@@ -136,6 +137,23 @@ def test_a_turn_leaves_each_tyre_the_longitudinal_grip_the_friction_ellipse_allo
     # the truth's utilisation is the ellipse's: near 1 where the wheels work at their limit
     truth_util = np.array([[r[f"utilisation_{w}"] for w in ("fl", "fr", "rl", "rr")] for r in stop.truth])
     assert truth_util.max() > 0.95
+
+
+def test_the_air_drag_is_that_of_the_car_in_its_wind():
+    # Rolling free before the brakes, the car slows by its drag alone: ½ρC_dA (v + w)|v + w| over
+    # its mass, a head wind w adding to the air's speed, a tail wind taking from it. (Within 5 %:
+    # the tyres also spin the wheels down, 3 % of the car's mass in rotating inertia.)
+    base = draw_stop(7, "a/burckhardt/straight")
+    decel = {}
+    for wind in (-5.0, 0.0, 5.0):
+        stop = simulate_stop(dataclasses.replace(base, wind_mps=wind), keep_trace=True)
+        rolling = (stop.trace.t > 0.2) & (stop.trace.t < base.pre_roll_s - 0.1)
+        decel[wind] = -float(np.mean(stop.trace.ax[rolling]))
+        v = float(np.mean(stop.trace.v[rolling]))
+        car = base.car
+        assert decel[wind] == pytest.approx(car.drag_area_coefficient * (v + wind) * abs(v + wind) / car.true_mass_kg,
+                                            rel=0.05)
+    assert decel[-5.0] < decel[0.0] < decel[5.0]
 
 
 @pytest.mark.parametrize("seed", [0, 1, 4, 5])

@@ -45,6 +45,8 @@ stopping distance, front axle first), "split" 15 % (a high-μ side and a low-μ 
 releases 0.8–2.0 s into the stop for 0.3–0.8 s and brakes again)
 - combined slip in a turn: the lateral force the curve needs lowers each tyre's longitudinal curve
   by the friction ellipse, lateral grip 0.85–1.10 × the longitudinal (see simulate.py)
+- wind along the road ± 0–5 m/s (a head wind positive): the air drag is ½ρC_dA·(v + w)|v + w|,
+  while the car's config gives ½ρC_dA alone, as a user knows it
 - initial speed 20–160 km/h; 0.8–1.2 s of free rolling first (`pre_roll_s` sets it: the front end
   learns the accelerometer's offset while rolling free); braking for at most 8 s (14 s
   without ABS; then the driver releases), 0.3 s recorded after standstill, 0.5 s after a release
@@ -105,6 +107,7 @@ class StopSpec:
     turn_radius_m: float = 0.0          # 0: straight ahead; > 0 a left turn
     # The tyres' lateral grip over their longitudinal grip: the friction ellipse's other axis.
     lateral_capacity: float = 1.0
+    wind_mps: float = 0.0               # along the road, a head wind positive (the air drag's speed is v + w)
     release_at_s: float | None = None   # after the brake onset
     release_for_s: float = 0.0
     dt_s: float = 0.001
@@ -352,4 +355,5 @@ def _draw_drive(rng: np.random.Generator, spec: StopSpec) -> StopSpec:
         changes.update(release_at_s=float(np.clip(release_frac * stop_s, 0.4, 2.0)), release_for_s=release_for)
     # (drawn last, and for every stop: the draws above stay what each seed drew before)
     changes["lateral_capacity"] = rng.uniform(0.85, 1.10)
+    changes["wind_mps"] = rng.uniform(-5.0, 5.0)
     return replace(spec, **changes)

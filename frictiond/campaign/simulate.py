@@ -243,7 +243,10 @@ class _Integrator:
 
     def step_body(self) -> None:
         car, dt = self.car, self.dt
-        drag = car.drag_area_coefficient * self.v * self.v
+        # (the car's speed through the air; a car at rest is held by its brakes and tyres, not
+        # blown along by a tail wind)
+        air = self.v + self.spec.wind_mps if self.v > 0.0 else 0.0
+        drag = car.drag_area_coefficient * air * abs(air)
         self.ax = -(sum(self.force) + drag) / car.true_mass_kg
         self.v = max(self.v + self.ax * dt, 0.0)
         self.x += self.v * dt

@@ -53,7 +53,7 @@ LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_ne
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
                  "_brake_gain_doubt",
                  "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_accel_bias_m2",
-                 "_lag_state")
+                 "_lag_state", "_resistance_doubt_sum_n", "_tyre_force_sum_n")
 
 
 class BodyEquation:
@@ -80,6 +80,9 @@ class BodyEquation:
         # lag it gives, then the time and the four matched brake torques of the last sample (their
         # rates). One tuple, replaced whole, so that a suspect sample's state is put back as is.
         self._lag_state: tuple[float, ...] = (0.0,) * 6 + (math.nan, 0.0, 0.0, 0.0, 0.0)
+        # Over the brake gain's time constant of braking: Σ what the car's resistance may be off
+        # by, Σ the tyres' total force (`resistance_doubt_share`).
+        self._resistance_doubt_sum_n = self._tyre_force_sum_n = 0.0
 
     @property
     def brake_gain_factor(self) -> float:
@@ -90,6 +93,25 @@ class BodyEquation:
         """How far the brake gain may still be off, as a share of it (the half-width of what the
         gain limits and the body equation allow): 0 once the accelerometer's offset is learnt."""
         return self._brake_gain_doubt
+
+    @property
+    def resistance_doubt_share(self) -> float:
+        """How far the brake gain may be off because the car's air drag may be (a share of it,
+        the half-width of a uniform error, as `brake_gain_doubt`): what the resistance may be off
+        by (`VehicleParams.resistance_doubt_n`) over the tyres' total force, both averaged over the
+        braking the gain was learnt from. On ice at 30 m/s a wind of 5 m/s is a tenth of it."""
+        if not self.options.brake_gain_correction or self._tyre_force_sum_n <= 0.0:
+            return 0.0
+        return self._resistance_doubt_sum_n / self._tyre_force_sum_n
+
+    def _learn_resistance_doubt(self, speed_mps: float, tyre_force_n: float) -> None:
+        """`resistance_doubt_share`'s sums, from a braking sample (forgotten as the gain is)."""
+        doubt = self.vehicle.resistance_doubt_n(speed_mps)
+        if not (math.isfinite(doubt) and math.isfinite(tyre_force_n)) or tyre_force_n <= 0.0:
+            return
+        keep = 1.0 - min(1.0, self.sample_period_s / max(self.options.brake_gain_time_constant, 1e-3))
+        self._resistance_doubt_sum_n = keep * self._resistance_doubt_sum_n + doubt
+        self._tyre_force_sum_n = keep * self._tyre_force_sum_n + tyre_force_n
 
     @property
     def accel_offset_doubt_mps2(self) -> float:

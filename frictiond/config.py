@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import logging
 import math
 import stat
 import types
@@ -114,7 +115,12 @@ _VEHICLE_RANGES = {
     "brake_pushout_pressure": (0.0, 50.0, True),
     "drag_area_coefficient": (0.0, 10.0, True),
     "rolling_resistance": (0.0, 1e4, True),
+    "drag_area_doubt": (0.0, 10.0, True),
+    "wind_doubt": (0.0, 50.0, True),
 }
+# A config that does not give the car's air drag: the middle of what cars have (½ρC_dA 0 for a
+# simulator without air, up to 0.7 kg/m for a van) and that middle again as its doubt.
+UNKNOWN_DRAG_AREA = 0.35
 
 
 def _check_range(key: str, value: float, low: float, high: float, low_inclusive: bool) -> None:
@@ -335,6 +341,13 @@ def parse_config(data: Any, path: Path | None) -> Config:
             raise ConfigError(f"{key}: missing section")
     can = _build_can(data["can"], base)
     vehicle = _build_section(VehicleParams, data["vehicle"], "vehicle", base, _VEHICLE_RANGES)
+    if not isinstance(data["vehicle"], dict) or "drag_area_coefficient" not in data["vehicle"]:
+        doubt = data["vehicle"].get("drag_area_doubt") if isinstance(data["vehicle"], dict) else None
+        vehicle = dataclasses.replace(vehicle, drag_area_coefficient=UNKNOWN_DRAG_AREA,
+                                      drag_area_doubt=UNKNOWN_DRAG_AREA if doubt is None else vehicle.drag_area_doubt)
+        logging.getLogger(__name__).warning(
+            "vehicle.drag_area_coefficient not given: taken as %.2f ± %.2f kg/m (any car); at speed on a "
+            "low-grip road the estimate is then less often VALID", UNKNOWN_DRAG_AREA, vehicle.drag_area_doubt)
     frontend = _build_section(FrontEndOptions, data.get("frontend"), "frontend", base)
     estimator = _build_section(EstimatorConfig, data.get("estimator"), "estimator", base)
     if estimator.kind not in ESTIMATOR_KINDS:

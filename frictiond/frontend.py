@@ -340,6 +340,7 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
             result = self._compute_sample(stale)
             if result.sample is not None and result.sample.braking:
                 self._attach_slip_spread(result.sample)
+                self._learn_resistance_doubt(result.sample.speed_mps, sum(result.sample.tyre_force_n))
             elif result.sample is not None and self._accel_bias_samples > free_rolling_before:
                 self._learn_pressure_zeros()
         if result.fault == "wheel speed glitch":
@@ -348,7 +349,7 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
             self._mark_abs_activity(result.sample)
             self._mark_body_mu(result.sample)
             self._mark_lateral_mu(result.sample)
-            result.sample.brake_gain_doubt = self._brake_gain_doubt
+            result.sample.brake_gain_doubt = math.hypot(self._brake_gain_doubt, self.resistance_doubt_share)
             result.sample.accel_offset_doubt_mps2 = self.accel_offset_doubt_mps2
             result.sample.input_suspect_share = self.gate.suspect_share()
         return result

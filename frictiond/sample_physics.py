@@ -219,8 +219,8 @@ class SamplePhysics:
 
     def _mark_body_mu(self, sample: PhysicalSample) -> None:
         """`sample.body_mu`: the car's total longitudinal tyre force over its weight, from the
-        accelerometer (offset removed) less drag and rolling resistance, where the wheels' own
-        sum agrees (the smaller of the two).
+        accelerometer (offset removed) less drag and rolling resistance (at the most the air's
+        doubt allows), where the wheels' own sum agrees (the smaller of the two).
 
         An accelerometer reads the contact and air forces over the mass, not gravity, so this
         holds on a slope, and the mass cancels (a loaded car reads the same). No road gives less
@@ -233,7 +233,8 @@ class SamplePhysics:
             return
         veh = self.vehicle
         v = sample.speed_mps
-        resistance = veh.resistance_force(v) / veh.mass
+        # (the most resistance the car may meet: what it leaves is grip the tyres surely used)
+        resistance = (veh.resistance_force(v) + veh.resistance_doubt_n(v)) / veh.mass
         body = (-(accel - self._accel_bias_mps2) - resistance) / GRAVITY_MPS2
         # The same total from the wheels (brake torques, inertia): a bound must not rest on one
         # sensor alone. Beyond what brake-gain error explains, one of them is wrong: no bound.

@@ -13,7 +13,8 @@ class VehicleParams:
     mass [kg], cg_to_front_axle / cg_to_rear_axle / cg_height / track_front / track_rear /
     wheel_radius [m], wheel_inertia [kg m^2], brake_gain_front / brake_gain_rear [N m/bar],
     brake_pushout_pressure [bar], drag_area_coefficient = 0.5 rho Cd A [kg/m],
-    rolling_resistance = B_v [N s/m].
+    rolling_resistance = B_v [N s/m]; drag_area_doubt [kg/m] and wind_doubt [m/s], how far the
+    air drag may be off (`resistance_doubt_n`).
     """
 
     mass: float = 1500.0
@@ -29,6 +30,11 @@ class VehicleParams:
     brake_pushout_pressure: float = 0.0
     drag_area_coefficient: float = 0.4
     rolling_resistance: float = 0.0
+    drag_area_doubt: float = 0.0
+    # A wind along the road that the estimate allows for [m/s], either way. 0 by default: at 5 m/s
+    # the drag a stop at 25 m/s meets may be 110 N more than configured, a fifth of the tyres'
+    # force on μ 0.034 ice, and no brake gain learnt there would be trusted (see README).
+    wind_doubt: float = 0.0
 
     @property
     def wheelbase(self) -> float:
@@ -52,6 +58,15 @@ class VehicleParams:
     def resistance_force(self, speed_mps: float) -> float:
         """Rolling resistance and aerodynamic drag on the car at `speed_mps` [N]."""
         return self.rolling_resistance * speed_mps + self.drag_area_coefficient * speed_mps * speed_mps
+
+    def resistance_doubt_n(self, speed_mps: float) -> float:
+        """How much more resistance than `resistance_force` the car may meet at `speed_mps` [N]:
+        the drag of a car whose ½ρC_dA is larger by `drag_area_doubt`, in a head wind of
+        `wind_doubt`. The body equation cannot tell that force from the tyres' (both slow the car),
+        so it is what the brake gain and the car's measured grip may be off by."""
+        air = speed_mps + self.wind_doubt
+        # ((D + ΔD)·air² − D·v², as its two parts: no rounding leaves a doubt where both are 0)
+        return self.drag_area_doubt * air * air + self.drag_area_coefficient * self.wind_doubt * (speed_mps + air)
 
     def brake_gain(self, wheel_index: int) -> float:
         return self.brake_gain_front if wheel_index < 2 else self.brake_gain_rear

@@ -33,11 +33,26 @@ def test_relative_dbc_path_resolves_against_config_folder(tmp_path, config_dict)
     assert cfg.can.dbc == ((tmp_path / "sub" / "car.dbc").resolve(),)
 
 
+def test_a_car_whose_air_drag_is_not_given_is_taken_as_any_car_with_that_doubt(tmp_path, config_dict):
+    # Given, the drag is the car's; not given, it is the middle of what cars and simulators without
+    # air have, 0 to 0.7 kg/m, and doubted by half of that range. (No wind unless one is given.)
+    given = load_config(write_config(tmp_path, config_dict)).vehicle
+    assert (given.drag_area_coefficient, given.drag_area_doubt, given.wind_doubt) == (0.4, 0.0, 0.0)
+    del config_dict["vehicle"]["drag_area_coefficient"]
+    unknown = load_config(write_config(tmp_path, config_dict)).vehicle
+    assert (unknown.drag_area_coefficient, unknown.drag_area_doubt) == (0.35, 0.35)
+    assert unknown.resistance_doubt_n(30.0) == pytest.approx(0.35 * 30.0**2)
+    config_dict["vehicle"]["drag_area_doubt"] = 0.1
+    assert load_config(write_config(tmp_path, config_dict)).vehicle.drag_area_doubt == 0.1
+
+
 BAD = [
     (lambda d: d["vehicle"].update(mass=-1500), "vehicle.mass"),
     (lambda d: d["vehicle"].update(mass="heavy"), "vehicle.mass"),
     (lambda d: d["vehicle"].update(wheel_radius=0), "vehicle.wheel_radius"),
     (lambda d: d["vehicle"].update(colour="red"), "vehicle.colour"),
+    (lambda d: d["vehicle"].update(wind_doubt=-1), "vehicle.wind_doubt"),
+    (lambda d: d["vehicle"].update(drag_area_doubt=float("nan")), "vehicle.drag_area_doubt"),
     (lambda d: d["vehicle"].pop("mass") and d.pop("vehicle"), "vehicle: missing"),
     (lambda d: d.update(extra={}), "extra: unknown section"),
     (lambda d: d["estimator"].update(kind="kalman"), "estimator.kind"),

@@ -582,12 +582,12 @@ def test_master_pressure_says_nothing_for_the_rest_of_a_stop_once_an_abs_release
 
 
 def feed_phases(fe: FrontEnd, phases, slip: float = 0.03, pressure_lag: float = 0.0,
-                accel_offset: float = 0.0) -> list:
+                accel_offset: float = 0.0, start_speed: float = 30.0) -> list:
     """Straight-line driving through `phases`, each (duration, deceleration(t in phase), the brake
     pressure the sensors read(t in phase)); the speed and wheel speeds integrate the deceleration,
     so the phases join smoothly. The pressure sensors read their value `pressure_lag` late, the
     accelerometer `accel_offset` above the car's acceleration. Returns (time, result) pairs."""
-    dt, t, v = 0.01, 0.0, 30.0
+    dt, t, v = 0.01, 0.0, start_speed
     schedule, start = [], 0.0
     for duration, decel, pressure in phases:
         schedule.append((start, start + duration, decel, pressure))
@@ -917,3 +917,56 @@ def test_an_accelerometer_offset_not_yet_learnt_is_not_taken_for_strong_brakes(c
         assert abs(fe.brake_gain_factor - 1.0) < 0.1
         assert all(0.1 < s.brake_gain_doubt <= 0.25 for s in samples)
         assert all(s.accel_offset_doubt_mps2 == pytest.approx(0.3 / math.sqrt(3.0)) for s in samples)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_the_air_drag_a_wind_may_change_is_doubted_in_the_gain_and_the_grip_the_car_used(compiled):
+    # Snow at 30 m/s, brakes as configured, the offset learnt: the body equation cannot tell a
+    # head wind's drag from the tyres' force. Allowed for (`wind_doubt` 5 m/s), the wind may add
+    # 0.4·(35² − 30²) = 130 N to the configured 360 N, a tenth of the tyres' 1,440 N: the brake
+    # gain is doubted by that much, and the grip the car measurably used (`body_mu`) is what is
+    # left with that drag taken off.
+    windy_car = VehicleParams(wind_doubt=5.0)
+
+    def run(vehicle: VehicleParams) -> tuple[FrontEnd, list]:
+        fe = FrontEnd(vehicle, FrontEndOptions(), MESSAGES, {m: PERIODS.get(m, 0.01) for m in MESSAGES}, "WHEELS", False)
+        if not compiled:
+            fe.core = None
+        needed = _needed_pressure(1.0, 0.03, 29.0)
+        results = feed_phases(fe, [(1.2, lambda t: 0.0, lambda t: 0.0), (1.5, lambda t: 1.0, lambda t: needed)])
+        return fe, [r.sample for t, r in results if r.sample is not None and r.sample.braking and t > 2.0]
+
+    calm_fe, calm = run(VEH)
+    windy_fe, windy = run(windy_car)
+    assert calm and len(windy) == len(calm)
+    assert all(s.brake_gain_doubt == 0.0 for s in calm) and calm_fe.resistance_doubt_share == 0.0
+    speed = windy[-1].speed_mps
+    doubt_n = VEH.drag_area_coefficient * ((speed + 5.0) ** 2 - speed**2)
+    tyres_n = sum(windy[-1].tyre_force_n)
+    assert windy_fe.resistance_doubt_share == pytest.approx(doubt_n / tyres_n, rel=0.05)
+    assert 0.07 < windy[-1].brake_gain_doubt < 0.12
+    # (the body's deceleration, 1 m/s², less the most drag the wind allows, over g; the wheels' own
+    # sum, which the calm car's body_mu takes where it is smaller, is now larger)
+    most_drag = [(1.0 - (windy_car.resistance_force(w.speed_mps) + windy_car.resistance_doubt_n(w.speed_mps))
+                  / windy_car.mass) / GRAVITY_MPS2 for w in windy]
+    assert all(w.body_mu == pytest.approx(m, abs=1e-3) for w, m in zip(windy, most_drag))
+    assert all(c.body_mu - w.body_mu > 0.004 for c, w in zip(calm, windy))   # (0.009 at most)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_car_of_unknown_air_drag_doubts_the_gain_by_what_any_car_could_have(compiled):
+    # The config does not give the drag: ½ρC_dA is taken as 0.35 ± 0.35 kg/m. At 30 m/s on snow
+    # that is 0 to 630 N of drag against the tyres' 1,200 N: the gain is doubted by about a
+    # quarter; at 10 m/s by a fiftieth.
+    unknown = VehicleParams(drag_area_coefficient=0.35, drag_area_doubt=0.35)
+    shares = {}
+    for start in (30.0, 10.0):
+        fe = FrontEnd(unknown, FrontEndOptions(), MESSAGES, {m: PERIODS.get(m, 0.01) for m in MESSAGES}, "WHEELS", False)
+        if not compiled:
+            fe.core = None
+        pressure = _needed_pressure(1.0, 0.03, start - 1.0)
+        feed_phases(fe, [(1.2, lambda t: 0.0, lambda t: 0.0), (1.0, lambda t: 1.0, lambda t: pressure)], start_speed=start)
+        shares[start] = fe.resistance_doubt_share
+    v = 30.0 - 1.0   # (about the speed the stop's braking averages)
+    assert shares[30.0] == pytest.approx(0.35 * v * v / (unknown.mass * 1.0 - 0.35 * v * v), rel=0.15)
+    assert shares[10.0] < 0.05 < 0.2 < shares[30.0]

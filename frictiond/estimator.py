@@ -613,7 +613,10 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             # No usable sample this cycle (wheels deep in slip, a lost frame) while the window
             # still holds this stop's data: the untrusted fit stands. Falling back to the prior
             # here made MuMax flicker between the fit and the nominal dry-road peak.
-            estimate = self._restate(last, t)
+            # (the brakes still hold a wheel in slip: not the pedal letting go, every slip fallen
+            # below what the fit takes)
+            slipping = sample.braking and any(slip >= o.min_slip for slip in sample.slip)
+            estimate = self._restate(last, t, slipping)
         else:
             estimate = self._hold(t, v)
         self._last_estimate = estimate

@@ -397,11 +397,12 @@ def test_the_window_has_room_for_window_s_of_four_wheels(window_s, period_s):
     assert est._window.capacity >= 4 * window_s / period_s
 
 
-def test_a_restated_fit_below_the_grip_the_car_used_is_not_made_valid():
+def test_a_restated_fit_below_the_grip_the_car_used_or_with_the_brakes_let_go_is_not_made_valid():
     # A cycle without usable samples restates the last CONVERGING fit, and may promote it when
     # its evidence is recent and only its settling held it back; not when the car has used more
-    # grip this stop than the fit claims (a bad last fit at walking pace, say).
-    def restated(highest):
+    # grip this stop than the fit claims (a bad last fit at walking pace, say), nor while the
+    # driver lets go of the brakes, no wheel left in slip (waiting adds no evidence).
+    def restated(highest, slipping=True):
         est = LugreTrustRegionEstimator()
         now = 5.0
         last = FrictionEstimate(now - 0.01, Status.CONVERGING, 0.22, 0.1, 1.0, 0.4, (0.22,) * 4, 0.002)
@@ -411,11 +412,13 @@ def test_a_restated_fit_below_the_grip_the_car_used_is_not_made_valid():
         for k in range(30):
             est._mu_history.append((now - 0.3 + 0.01 * k, 0.22))
         est._body_mu.highest = highest
-        return est._restate(last, now)
+        return est._restate(last, now, slipping)
 
     assert restated(0.0).status == Status.VALID
     below = restated(0.45)
     assert below.status == Status.CONVERGING and below.confidence < 0.5
+    released = restated(0.0, slipping=False)
+    assert released.status == Status.CONVERGING and released.confidence == 0.4   # (the fit's own, as it was)
 
 
 @pytest.mark.parametrize("after, confirmed", [
@@ -739,15 +742,24 @@ def test_a_flat_top_must_be_clear_of_a_rising_curve_beyond_its_noise(tops, flat)
     assert (why[0].startswith("flat top not resolved")) == (not flat)
 
 
-def test_a_release_sweeping_under_a_held_slip_is_no_flat_top():
+def test_a_release_sweeping_under_a_held_slip_is_no_flat_top(monkeypatch):
     # Dev stop 20941 (its story above): the top slips' slope is about zero, and noise. Without
-    # the bound on it (`rising_elasticity` out of reach) the same stop goes VALID 22 % low.
+    # the bound on it (`rising_elasticity` out of reach) the fit made as the driver let go
+    # claimed the peak, and restated after the brakes were off it went VALID 22 % low. Either
+    # guard keeps it out: the bound, or no VALID entered by a restate while the brakes let go.
     from frictiond.campaign.score import estimator_scores
+    from frictiond.estimate_report import EstimateReport
 
     stop, estimates = campaign_stop_estimates(20941)
     assert estimator_scores(estimates, stop.truth)["false_valid"] == 0
     stop, unbounded = campaign_stop_estimates(20941, rising_elasticity=100.0)
-    assert estimator_scores(unbounded, stop.truth)["false_valid"] > 10
+    assert estimator_scores(unbounded, stop.truth)["false_valid"] == 0
+    restate = EstimateReport._restate
+    monkeypatch.setattr(EstimateReport, "_restate", lambda self, last, now_s, slipping: restate(self, last, now_s, True))
+    stop, bounded = campaign_stop_estimates(20941)
+    assert estimator_scores(bounded, stop.truth)["false_valid"] == 0
+    stop, neither = campaign_stop_estimates(20941, rising_elasticity=100.0)
+    assert estimator_scores(neither, stop.truth)["false_valid"] > 10
 
 
 def test_one_wheel_contradicting_the_fit_leaves_no_excitation(monkeypatch):

@@ -109,7 +109,7 @@ class BodyEquation:
         doubt = self.vehicle.resistance_doubt_n(speed_mps)
         if not (math.isfinite(doubt) and math.isfinite(tyre_force_n)) or tyre_force_n <= 0.0:
             return
-        keep = 1.0 - min(1.0, self.sample_period_s / max(self.options.brake_gain_time_constant, 1e-3))
+        keep = self._brake_gain_keep()
         self._resistance_doubt_sum_n = keep * self._resistance_doubt_sum_n + doubt
         self._tyre_force_sum_n = keep * self._tyre_force_sum_n + tyre_force_n
 
@@ -252,12 +252,17 @@ class BodyEquation:
         opts = self.options
         lim = opts.brake_gain_limits
         ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
-        keep = 1.0 - min(1.0, self.sample_period_s / max(opts.brake_gain_time_constant, 1e-3))
+        keep = self._brake_gain_keep()
         weight = total_brake * total_brake
         self._gain_sum_tt = keep * self._gain_sum_tt + weight
         self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
         self._brake_gain_factor, self._brake_gain_doubt = gain_within_offset_ambiguity(
             self._gain_sum_tn / self._gain_sum_tt, lim, self._unlearnt_offset_torque_nm())
+
+    def _brake_gain_keep(self) -> float:
+        """What a braking sample leaves of the gain's sums (and `resistance_doubt_share`'s): the
+        exponential forgetting over `brake_gain_time_constant`."""
+        return 1.0 - min(1.0, self.sample_period_s / max(self.options.brake_gain_time_constant, 1e-3))
 
     def _unlearnt_offset_torque_nm(self) -> float:
         """The share of the brakes' torque that what is not yet learnt of the accelerometer's

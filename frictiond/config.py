@@ -341,10 +341,10 @@ def parse_config(data: Any, path: Path | None) -> Config:
             raise ConfigError(f"{key}: missing section")
     can = _build_can(data["can"], base)
     vehicle = _build_section(VehicleParams, data["vehicle"], "vehicle", base, _VEHICLE_RANGES)
-    if not isinstance(data["vehicle"], dict) or "drag_area_coefficient" not in data["vehicle"]:
-        doubt = data["vehicle"].get("drag_area_doubt") if isinstance(data["vehicle"], dict) else None
-        vehicle = dataclasses.replace(vehicle, drag_area_coefficient=UNKNOWN_DRAG_AREA,
-                                      drag_area_doubt=UNKNOWN_DRAG_AREA if doubt is None else vehicle.drag_area_doubt)
+    given = data["vehicle"] or {}   # (a mapping or nothing: `_build_section` refused the rest)
+    if "drag_area_coefficient" not in given:
+        doubt = vehicle.drag_area_doubt if "drag_area_doubt" in given else UNKNOWN_DRAG_AREA
+        vehicle = dataclasses.replace(vehicle, drag_area_coefficient=UNKNOWN_DRAG_AREA, drag_area_doubt=doubt)
         logging.getLogger(__name__).warning(
             "vehicle.drag_area_coefficient not given: taken as %.2f ± %.2f kg/m (any car); at speed on a "
             "low-grip road the estimate is then less often VALID", UNKNOWN_DRAG_AREA, vehicle.drag_area_doubt)

@@ -323,13 +323,17 @@ class InputCodec:
         by_message: dict[str, list[ResolvedSignal]] = {}
         for r in self.resolved:
             by_message.setdefault(r.message, []).append(r)
-        trigger_messages = {r.message for r in self.resolved if r.name.startswith("wheel_speed")}
-        if len(trigger_messages) != 1:
-            raise ConfigError(
-                "signals: the four wheel speeds must come from one message (it triggers each update); "
-                f"they come from {', '.join(sorted(trigger_messages))}"
-            )
-        self.trigger_message = trigger_messages.pop()
+        # The message of wheel_speed_fl triggers each update; the other wheels' speeds may come from
+        # other messages (a car that sends front and rear apart), joined at its instants
+        # (`wheel_speed_join`).
+        wheel_messages: dict[str, list[str]] = {}
+        for r in self.resolved:
+            if r.name.startswith("wheel_speed"):
+                wheel_messages.setdefault(r.message, []).append(r.name)
+        self.trigger_message = next((r.message for r in self.resolved if r.name == "wheel_speed_fl"),
+                                    next(iter(wheel_messages), ""))
+        self.wheel_partners: dict[str, tuple[str, ...]] = {
+            m: tuple(names) for m, names in wheel_messages.items() if m != self.trigger_message}
         self._plans: dict[int, _MessagePlan] = {}
         for name, sigs in by_message.items():
             message = db.get_message_by_name(name)
@@ -337,6 +341,10 @@ class InputCodec:
                 raise ConfigError(f"signals: message {name!r} uses an extended (29-bit) ID; only 11-bit inputs are supported")
             if message.frame_id in self._plans:
                 raise ConfigError(f"signals: two mapped messages share frame ID 0x{message.frame_id:X}")
+            if name in self.wheel_partners and message.is_multiplexed():
+                raise ConfigError(
+                    f"signals: wheel speeds from message {name!r}, which is multiplexed: wheel speeds that come "
+                    f"apart from {self.trigger_message!r} (the message of wheel_speed_fl) must be whole in every frame")
             self._plans[message.frame_id] = _MessagePlan(message, sigs, name == self.trigger_message)
         self.input_ids: frozenset[int] = frozenset(self._plans)
         self.trigger_id = next(p.frame_id for p in self._plans.values() if p.is_trigger)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Callable
 
 from . import input_quality
 from .codec import DecodeFailure, InputCodec, OutputCodec, load_databases
@@ -17,6 +17,7 @@ from .frames import Frame
 from .frontend import PRESSURE_NAMES, FrontEnd, FrontEndResult, make_front_end
 from .relaxation import RelaxationCompensator
 from .samples import FrictionEstimate, PhysicalSample, Status
+from .wheel_speed_join import WheelSpeedJoin
 
 _new_tuple = tuple.__new__
 
@@ -87,6 +88,12 @@ class Pipeline:
         self.output_codec = OutputCodec(output_db)
         messages = self.input_codec.input_messages()
         trigger = next(m.name for m in messages if m.frame_id == self.input_codec.trigger_id)
+        partners = self.input_codec.wheel_partners
+        # Wheel speeds of messages apart from the trigger's, completed at its instants.
+        self.wheel_join: WheelSpeedJoin | None = None
+        if partners:
+            self.wheel_join = WheelSpeedJoin(trigger, partners, {m.name: m.period_s for m in messages})
+            messages = WheelSpeedJoin.front_end_messages(messages, trigger, partners)
         # A car that sends only its master-cylinder pressure maps it to all four wheels.
         pressure_sources = {(config.signals[n].message, config.signals[n].signal)
                             for n in PRESSURE_NAMES if n in config.signals}
@@ -98,6 +105,9 @@ class Pipeline:
         self.last_estimate: FrictionEstimate | None = None
         self.last_sample: PhysicalSample | None = None
         self.last_result: FrontEndResult | None = None
+        # Called with each estimate sent and its sample (replay's recorder): one frame may release
+        # more than one update where the wheel speeds come from several messages (`wheel_join`).
+        self.on_estimate: Callable[[FrictionEstimate, PhysicalSample | None], None] | None = None
         self._last_valid: FrictionEstimate | None = None
         self._last_output_s = -math.inf
         self._last_trigger_s = -math.inf
@@ -127,11 +137,19 @@ class Pipeline:
             self._ignore(frame)
             return []
         stats.input_frames += 1
-        result = self.front_end.push(decoded.time_s, decoded.message, decoded.values)
-        if result is None:
-            return []
-        self._last_trigger_s = frame.time_s
-        return self._update(frame.time_s, result)
+        if self.wheel_join is None:
+            result = self.front_end.push(decoded.time_s, decoded.message, decoded.values)
+            if result is None:
+                return []
+            self._last_trigger_s = frame.time_s
+            return self._update(frame.time_s, result)
+        out: list[Frame] = []
+        for part in self.wheel_join.push(decoded):
+            result = self.front_end.push(part.time_s, part.message, part.values)
+            if result is not None:
+                self._last_trigger_s = frame.time_s
+                out.extend(self._update(frame.time_s, result))
+        return out
 
     def count_unrelated(self, frames: int) -> None:
         """Count standard-ID data frames of other IDs that a reader dropped before `process`."""
@@ -230,7 +248,10 @@ class Pipeline:
             elif result.sample.braking:
                 self._count_not_valid(estimate)
         self.last_estimate = estimate
-        return self._emit(time_s, estimate, self.last_sample)
+        frames = self._emit(time_s, estimate, self.last_sample)
+        if frames and self.on_estimate is not None:
+            self.on_estimate(estimate, self.last_sample)
+        return frames
 
     @property
     def not_valid_reason(self) -> str:

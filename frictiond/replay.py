@@ -126,17 +126,16 @@ def replay_frames(
 ) -> ReplaySummary:
     first = last = None
     process = pipeline.process
+    if recorder is not None:
+        pipeline.on_estimate = recorder.record
     for frame in frames:
         if first is None:
             first = frame.time_s
         last = frame.time_s
         out = process(frame)
-        if out:
-            if sink is not None:
-                for f in out:
-                    sink.write(f)
-            if recorder is not None:
-                recorder.record(pipeline.last_estimate, pipeline.last_sample)
+        if out and sink is not None:
+            for f in out:
+                sink.write(f)
     return ReplaySummary(
         pipeline.stats, first, last, pipeline.last_estimate, pipeline.front_end.period_of(pipeline.trigger_message),
         pipeline.input_codec.counter_jumps, pipeline.front_end.skipped_triggers,
@@ -166,10 +165,11 @@ def replay_log(
 def estimates_of(config: Any, frames: Iterable[Frame]) -> tuple[Pipeline, list[FrictionEstimate]]:
     """Run a fresh pipeline over frames; the estimate of every update (for tests and benchmarks)."""
     pipeline = Pipeline(config)
-    estimates = []
+    estimates: list[FrictionEstimate] = []
+    pipeline.on_estimate = lambda estimate, _sample: estimates.append(estimate)
+    process = pipeline.process
     for frame in frames:
-        if pipeline.process(frame):
-            estimates.append(pipeline.last_estimate)
+        process(frame)
     return pipeline, estimates
 
 

@@ -67,6 +67,9 @@ def _do_check(args: argparse.Namespace) -> int:
         print(f"  {m.name:{mw}s} 0x{m.frame_id:03X}  {m.length} bytes  {_rate(m.period_s, 1)}{kind}  "
               + (f"alive counter {counter} checked" if counter else "no alive counter"), file=out)
     print(f"\ntrigger  {input_codec.trigger_message} (one estimator update per frame)", file=out)
+    for partner, names in input_codec.wheel_partners.items():
+        print(f"         {', '.join(names)} from {partner}: interpolated at each trigger frame's instant "
+              "(an update waits for its next frame)", file=out)
     print(f"outputs  FRICTION_ESTIMATE 0x{output_codec.estimate_id:03X}, FRICTION_WHEEL 0x{output_codec.wheel_id:03X} "
           f"(from {config.can.output_dbc})", file=out)
     print("OK", file=out)

@@ -15,7 +15,7 @@ from frictiond.campaign.abs_control import ABS_FAMILIES
 from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, draw_stop, seeds_for
 from frictiond.campaign.report import format_families, format_not_valid, full_report, reproduce_command, target_rows
 from frictiond.campaign.run import load_rows, run_campaign, save_rows
-from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, WHEEL_MESSAGE
+from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, REAR_WHEEL_MESSAGE, WHEEL_MESSAGE
 from frictiond.campaign.simulate import simulate_stop
 from frictiond.campaign.tyres import BURCKHARDT_SURFACES, TyreCurve
 
@@ -75,6 +75,7 @@ def test_draws_stay_in_their_documented_ranges():
     assert {s.manoeuvre for s in specs} == set(MANOEUVRES)
     assert {s.jump_kind for s in specs if s.manoeuvre == "jump"} == {"dry-wet", "wet-dry", "to-ice"}
     assert any(s.sensors.master_only for s in specs) and not all(s.sensors.master_only for s in specs)
+    assert 0.2 < sum(s.sensors.wheel_messages == "axles" for s in specs) / len(specs) < 0.4
     assert any(s.relaxation_m > 0 for s in specs)
     slopes = [s.surfaces[0].speed_slope for s in specs]
     assert min(slopes) < -0.1 and max(slopes) > 0.1      # speed dependence of either sign
@@ -176,6 +177,28 @@ def test_wheel_speeds_arrive_at_the_drawn_rate(hz):
     assert np.median(np.diff(times)) == pytest.approx(1.0 / hz, rel=0.05)
     assert len(times) == pytest.approx(hz * stop.truth[-1]["time_s"], rel=0.03)
     assert config.signals["wheel_speed_fl"].message == WHEEL_MESSAGE
+
+
+def test_a_car_may_send_its_rear_wheel_speeds_apart_and_nothing_else_changes():
+    from frictiond.replay import estimates_of
+
+    spec = draw_stop(7)
+    stops = {wm: simulate_stop(dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, wheel_messages=wm)))
+             for wm in ("one", "axles")}
+    one, two = stops["one"], stops["axles"]
+    assert two.config().signals["wheel_speed_rr"].message == REAR_WHEEL_MESSAGE
+    assert two.config().signals["wheel_speed_fl"].message == WHEEL_MESSAGE
+    front = [f.time_s for f in two.frames if f.can_id == 0xB0]
+    rear = [f.time_s for f in two.frames if f.can_id == 0xB1]
+    assert abs(len(rear) - len(front)) < 0.05 * len(front) and not set(rear) & set(front)   # own phase
+    # The other messages are the one-message car's, frame for frame; the front speeds too.
+    others = lambda stop: [(f.time_s, f.can_id, f.data) for f in stop.frames if f.can_id not in (0xB0, 0xB1)]  # noqa: E731
+    assert others(one) == others(two)
+    assert front == [f.time_s for f in one.frames if f.can_id == 0xB0]
+    # Decoded through the join, an update per front frame, with the rear speeds it had.
+    pipeline, estimates = estimates_of(two.config("lugre-tr"), two.frames)
+    assert pipeline.wheel_join is not None and len(estimates) == len(front) - pipeline.wheel_join.dropped
+    assert pipeline.wheel_join.dropped < 0.05 * len(front)
 
 
 def test_master_cylinder_only_cars_send_no_wheel_pressures():

@@ -59,6 +59,8 @@ Sensors (see sensors.py)
 - pressure sensor lag 0–40 ms, offset ± 0–1 bar, noise σ 0.1–0.6 bar
 - 20 % of cars send only the master-cylinder pressure (no per-wheel pressures)
 - 15 % have a ground-speed sensor; ABS flags: none 40 %, global 30 %, per wheel 30 %
+- 30 % send the rear wheel speeds in a message of their own (big-endian, at the same rate with
+  their own phase, jitter and losses), drawn last: the other draws are those of before
 """
 from __future__ import annotations
 
@@ -242,6 +244,7 @@ def _draw_sensors(rng: np.random.Generator) -> SensorSpec:
         pressure_lag_s=u(0.0, 0.04), pressure_offset_bar=sign[2] * u(0.0, 1.0), pressure_noise_bar=u(0.1, 0.6),
         master_only=bool(rng.random() < 0.20), reference_speed=bool(rng.random() < 0.15),
         abs_flags=("none", "global", "wheel")[int(rng.choice(3, p=[0.4, 0.3, 0.3]))],
+        wheel_messages="axles" if rng.random() < 0.3 else "one",
     )
 
 

@@ -176,6 +176,7 @@ _FAMILY_GROUPS: dict[str, Callable[[Row], str]] = {
     "relaxation": _relaxation_class,
     "pressures": lambda r: "master-only" if r.get("master_only") else "per-wheel",
     "wheel_hz": lambda r: str(r.get("wheel_hz")),
+    "wheel_messages": lambda r: str(r.get("wheel_messages", "one")),
 }
 
 

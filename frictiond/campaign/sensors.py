@@ -15,6 +15,7 @@ from scipy.signal import lfilter
 
 WHEELS = ("fl", "fr", "rl", "rr")
 WHEEL_MESSAGE = "WHEEL_SPEEDS"
+REAR_WHEEL_MESSAGE = "WHEEL_SPEEDS_REAR"
 ACCEL_MESSAGE = "ACCELERATIONS"
 PRESSURE_MESSAGE = "BRAKE_PRESSURES"
 MASTER_MESSAGE = "BRAKE_MASTER"
@@ -42,6 +43,9 @@ class SensorSpec:
     master_only: bool               # only the master-cylinder pressure is sent
     reference_speed: bool           # a ground-speed sensor sends VEHICLE_SPEED_REF
     abs_flags: str                  # "none", "global" or "wheel"
+    # "one": the four wheel speeds in one message; "axles": the rear ones in a message of their own
+    # (big-endian, own phase, jitter and losses), as cars that send front and rear apart do
+    wheel_messages: str = "one"
 
 
 class BusEvent(NamedTuple):
@@ -61,15 +65,20 @@ def bus_dbc_text(spec: SensorSpec) -> str:
     res = spec.wheel_resolution_kmh
     lines = ['VERSION "frictiond campaign"', "", "NS_ :", "\tBA_", "\tBA_DEF_", "\tBA_DEF_DEF_", "\tCM_", "",
              "BS_:", "", "BU_: VEHICLE FRICTIOND", "", ""]
+    in_trigger = WHEELS if spec.wheel_messages == "one" else WHEELS[:2]
     msgs: list[tuple[int, str, int, list[str]]] = [
         (0xB0, WHEEL_MESSAGE, spec.wheel_hz,
          [f" SG_ WheelSpeed_{w.upper()} : {16 * k}|16@1+ ({res!r},0) [0|{res * 65535:.4f}] \"km/h\" FRICTIOND"
-          for k, w in enumerate(WHEELS)]),
+          for k, w in enumerate(in_trigger)]),
         (0xC0, ACCEL_MESSAGE, spec.accel_hz,
          [' SG_ AccelLong : 0|16@1- (0.001,0) [-32.768|32.767] "m/s^2" FRICTIOND',
           ' SG_ AccelLat : 16|16@1- (0.001,0) [-32.768|32.767] "m/s^2" FRICTIOND',
           ' SG_ YawRate : 32|16@1- (0.0001,0) [-3.2768|3.2767] "rad/s" FRICTIOND']),
     ]
+    if spec.wheel_messages == "axles":
+        msgs.append((0xB1, REAR_WHEEL_MESSAGE, spec.wheel_hz,
+                     [f" SG_ WheelSpeed_{w.upper()} : {8 * k + 7}|16@0+ ({res!r},0) [0|{res * 65535:.4f}] \"km/h\" "
+                      "FRICTIOND" for k, w in ((0, "rl"), (2, "rr"))]))
     if spec.master_only:
         msgs.append((0xD4, MASTER_MESSAGE, spec.pressure_hz,
                      [' SG_ MasterCylPressure : 0|16@1+ (0.01,0) [0|655.35] "bar" FRICTIOND']))
@@ -94,8 +103,9 @@ def bus_dbc_text(spec: SensorSpec) -> str:
 
 def signal_map(spec: SensorSpec) -> dict[str, dict[str, Any]]:
     """The config's `signals:` section for this car's DBC."""
-    m: dict[str, dict[str, Any]] = {f"wheel_speed_{w}": {"message": WHEEL_MESSAGE, "signal": f"WheelSpeed_{w.upper()}"}
-                                    for w in WHEELS}
+    m: dict[str, dict[str, Any]] = {
+        f"wheel_speed_{w}": {"message": REAR_WHEEL_MESSAGE if spec.wheel_messages == "axles" and w[0] == "r"
+                             else WHEEL_MESSAGE, "signal": f"WheelSpeed_{w.upper()}"} for w in WHEELS}
     m["accel_long"] = {"message": ACCEL_MESSAGE, "signal": "AccelLong"}
     m["accel_lat"] = {"message": ACCEL_MESSAGE, "signal": "AccelLat"}
     m["yaw_rate"] = {"message": ACCEL_MESSAGE, "signal": "YawRate"}
@@ -140,11 +150,17 @@ def sensor_events(spec: SensorSpec, trace: Any, radius_m: float, rng: np.random.
     per_message: list[tuple[np.ndarray, str, list[dict[str, float]]]] = []
 
     times = _frame_times(rng, spec.wheel_hz, end_s, spec)
-    kmh = np.column_stack([np.interp(times, t, trace.omega[:, i]) for i in range(4)]) * radius_m * 3.6
-    kmh += rng.normal(0.0, spec.wheel_noise_kmh, kmh.shape)
-    kmh = np.maximum(np.round(kmh / spec.wheel_resolution_kmh) * spec.wheel_resolution_kmh, 0.0)
-    rad_s = kmh / 3.6 / radius_m    # canonical unit; the DBC factor makes the encoding exact
-    per_message.append((times, WHEEL_MESSAGE, _rows([f"wheel_speed_{w}" for w in WHEELS], rad_s)))
+    rad_s = _wheel_speeds(spec, trace, times, radius_m, rng)
+    names = [f"wheel_speed_{w}" for w in WHEELS]
+    if spec.wheel_messages == "axles":
+        # The rear message's own times and noise, from a stream of its own: every other frame of
+        # the stop is the one-message car's.
+        rear_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])  # type: ignore[attr-defined]
+        rear_times = _frame_times(rear_rng, spec.wheel_hz, end_s, spec)
+        rear = _wheel_speeds(spec, trace, rear_times, radius_m, rear_rng)[:, 2:]
+        per_message.append((rear_times, REAR_WHEEL_MESSAGE, _rows(names[2:], rear)))
+        rad_s, names = rad_s[:, :2], names[:2]
+    per_message.append((times, WHEEL_MESSAGE, _rows(names, rad_s)))
 
     times = _frame_times(rng, spec.accel_hz, end_s, spec)
     n = len(times)
@@ -181,6 +197,16 @@ def sensor_events(spec: SensorSpec, trace: Any, radius_m: float, rng: np.random.
         else:
             per_message.append((times, ABS_MESSAGE, _rows([f"abs_active_{w}" for w in WHEELS], flags.astype(float))))
     return _merge(per_message)
+
+
+def _wheel_speeds(spec: SensorSpec, trace: Any, times: np.ndarray, radius_m: float,
+                  rng: np.random.Generator) -> np.ndarray:
+    """The four wheel speeds at `times` as a wheel-speed ECU sends them, in rad/s: ground speed in
+    km/h over the configured radius, noisy and quantised."""
+    kmh = np.column_stack([np.interp(times, trace.t, trace.omega[:, i]) for i in range(4)]) * radius_m * 3.6
+    kmh += rng.normal(0.0, spec.wheel_noise_kmh, kmh.shape)
+    kmh = np.maximum(np.round(kmh / spec.wheel_resolution_kmh) * spec.wheel_resolution_kmh, 0.0)
+    return kmh / 3.6 / radius_m    # canonical unit; the DBC factor makes the encoding exact
 
 
 def _rows(names: list[str], values: np.ndarray) -> list[dict[str, float]]:

@@ -46,17 +46,21 @@ _QUANTITY = {
 _DEG = math.pi / 180.0
 _UNITS: dict[str, dict[str, float | None]] = {
     # None: "ground speed, divide by the wheel radius" (resolved per vehicle)
-    "wheel_speed": {"rad/s": 1.0, "1/s": 1.0, "rpm": 2 * math.pi / 60, "1/min": 2 * math.pi / 60,
+    "wheel_speed": {"rad/s": 1.0, "rad/sec": 1.0, "1/s": 1.0, "rpm": 2 * math.pi / 60, "1/min": 2 * math.pi / 60,
                     "U/min": 2 * math.pi / 60, "rev/min": 2 * math.pi / 60,
-                    "deg/s": _DEG, "°/s": _DEG, "m/s": None, "km/h": None, "kph": None, "kmh": None, "mph": None},
-    "acceleration": {"m/s^2": 1.0, "m/s²": 1.0, "m/s2": 1.0, "m/(s^2)": 1.0, "m/s/s": 1.0, "g": GRAVITY_MPS2},
-    "angular_rate": {"rad/s": 1.0, "deg/s": _DEG, "°/s": _DEG},
-    "pressure": {"bar": 1.0, "mbar": 1e-3, "kpa": 0.01, "mpa": 10.0, "pa": 1e-5, "psi": 0.0689475729},
-    "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704},
+                    "deg/s": _DEG, "°/s": _DEG, "m/s": None, "m/sec": None, "km/h": None, "km/hr": None, "kph": None,
+                    "kmh": None, "kmph": None, "mph": None},
+    "acceleration": {"m/s^2": 1.0, "m/s²": 1.0, "m/s2": 1.0, "m/(s^2)": 1.0, "m/s/s": 1.0, "m/sec^2": 1.0,
+                     "m/sec2": 1.0, "m/sec²": 1.0, "ms^-2": 1.0, "m*s^-2": 1.0, "g": GRAVITY_MPS2},
+    "angular_rate": {"rad/s": 1.0, "rad/sec": 1.0, "deg/s": _DEG, "deg/sec": _DEG, "°/s": _DEG, "°/sec": _DEG},
+    "pressure": {"bar": 1.0, "mbar": 1e-3, "hpa": 1e-3, "kpa": 0.01, "mpa": 10.0, "pa": 1e-5, "psi": 0.0689475729},
+    "speed": {"m/s": 1.0, "m/sec": 1.0, "km/h": 1 / 3.6, "km/hr": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6,
+              "kmph": 1 / 3.6, "mph": 0.44704},
     "torque": {"n.m": 1.0, "nm": 1.0, "n*m": 1.0, "n·m": 1.0, "knm": 1000.0},
     "flag": {"1": 1.0, "-": 1.0, "bool": 1.0, "on/off": 1.0},
 }
-_GROUND_SPEED = {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6, "mph": 0.44704}
+_GROUND_SPEED = {"m/s": 1.0, "m/sec": 1.0, "km/h": 1 / 3.6, "km/hr": 1 / 3.6, "kph": 1 / 3.6, "kmh": 1 / 3.6,
+                 "kmph": 1 / 3.6, "mph": 0.44704}
 CANONICAL_UNIT = {"wheel_speed": "rad/s", "acceleration": "m/s^2", "angular_rate": "rad/s",
                   "pressure": "bar", "speed": "m/s", "torque": "N.m", "flag": "1"}
 

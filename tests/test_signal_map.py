@@ -102,6 +102,9 @@ def check_config(path):
     ("rpm", 0.1, 60 / (2 * math.pi)),
     ("U/min", 0.1, 60 / (2 * math.pi)),
     ("mph", 0.01, RADIUS / 0.44704),
+    ("km/hr", 0.01, RADIUS * 3.6),      # spellings other DBCs use
+    ("kmph", 0.01, RADIUS * 3.6),
+    ("rad/sec", 0.01, 1.0),
 ])
 def test_wheel_speed_units(tmp_path, unit, scale, per_rad_s):
     codec = codec_for(make_config(tmp_path, wheels_msg(unit, scale) + ACCEL + PRESS, base_signals()))
@@ -109,6 +112,18 @@ def test_wheel_speed_units(tmp_path, unit, scale, per_rad_s):
     values = decode_physical(codec, "WHL", {f"V_{w}": round(v * per_rad_s / scale) * scale for w, v in omega.items()})
     for w, v in omega.items():
         assert values[f"wheel_speed_{w.lower()}"] == pytest.approx(v, abs=scale / per_rad_s + 1e-9), unit
+
+
+@pytest.mark.parametrize("accel_unit,per_mps2,pressure_unit,per_bar", [
+    ("m/sec^2", 1.0, "hPa", 1000.0), ("ms^-2", 1.0, "mbar", 1000.0), ("g", 1 / 9.80665, "kPa", 100.0)])
+def test_acceleration_and_pressure_spellings(tmp_path, accel_unit, per_mps2, pressure_unit, per_bar):
+    text = (wheels_msg() + ACCEL.replace('"m/s^2"', f'"{accel_unit}"')
+            + PRESS.replace('(0.01,0) [0|600] "bar"', f'(0.1,0) [0|6000] "{pressure_unit}"'))
+    codec = codec_for(make_config(tmp_path, text, base_signals()))
+    accel = decode_physical(codec, "ACC", {"LongAcc": round(-7.5 * per_mps2, 3), "LatAcc": 0.0, "Yaw": 0.0})
+    assert accel["accel_long"] == pytest.approx(-7.5, abs=1e-3 / per_mps2)
+    press = decode_physical(codec, "PRESS", {f"P_{w}": 42.0 * per_bar / 100.0 for w in ("FL", "FR", "RL", "RR")})
+    assert press["brake_pressure_fl"] == pytest.approx(0.42, rel=1e-6)
 
 
 @pytest.mark.parametrize("bits,order,offset", [(14, "0", 0.0), (15, "0", 0.0), (16, "0", -100.0), (14, "1", -50.0),

@@ -54,6 +54,7 @@ def frame_to_message(frame: Frame, channel: Any = None) -> can.Message:
         is_extended_id=frame.is_extended,
         is_error_frame=frame.is_error,
         is_remote_frame=frame.is_remote,
+        is_fd=len(frame.data) > 8,   # (a classic frame carries at most 8 bytes)
         channel=channel,
     )
 
@@ -305,11 +306,17 @@ class LogWriter:
         self.close()
 
 
-def open_bus(interface: str, channel: str, receive_ids: Iterable[int] | None = None, **kwargs: Any) -> can.BusABC:
+def open_bus(interface: str, channel: str, receive_ids: Iterable[int] | None = None, fd: bool = False,
+             **kwargs: Any) -> can.BusABC:
     """Open a python-can bus, ignoring stray can.conf files and CAN_* environment settings.
 
     `receive_ids` become exact-match kernel filters on SocketCAN (software filters elsewhere).
+    `fd`: some inputs are CAN FD frames; a SocketCAN socket is then opened for FD (it receives
+    classic frames as well). Other interfaces take their FD settings (data bitrate, timing)
+    from their own keyword arguments, which a config cannot give: there it is left to them.
     """
+    if fd and interface == "socketcan":
+        kwargs["fd"] = True
     filters = None
     if receive_ids is not None:
         filters = [{"can_id": cid, "can_mask": 0x7FF, "extended": False} for cid in sorted(set(receive_ids))]

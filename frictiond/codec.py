@@ -351,6 +351,9 @@ class InputCodec:
                     f"apart from {self.trigger_message!r} (the message of wheel_speed_fl) must be whole in every frame")
             self._plans[message.frame_id] = _MessagePlan(message, sigs, name == self.trigger_message)
         self.input_ids: frozenset[int] = frozenset(self._plans)
+        # Inputs sent as CAN FD frames (the DBC says so, or they carry more than 8 bytes): a
+        # SocketCAN socket receives them only when opened for FD (`busio.open_bus`).
+        self.fd = any(bool(getattr(p.message, "is_fd", False)) or p.length > 8 for p in self._plans.values())
         self.trigger_id = next(p.frame_id for p in self._plans.values() if p.is_trigger)
         self.counter_jumps = 0
         self._counter_signals = {

@@ -48,6 +48,8 @@ class DaemonBus:
         cfg = self.config.can
         kwargs = {"bitrate": cfg.bitrate} if cfg.bitrate else {}
         try:
+            if self.pipeline.input_codec.fd:
+                kwargs["fd"] = True
             self.bus = self._bus_factory(cfg.interface, cfg.channel, self.pipeline.input_codec.input_ids, **kwargs)
         except (NotImplementedError, ImportError, TypeError) as exc:   # incl. CanInterfaceNotImplementedError
             raise StartupError(f"can.interface: cannot use {cfg.interface!r}: {exc}") from None

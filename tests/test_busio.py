@@ -63,3 +63,36 @@ def test_a_real_socket_timestamp_lands_on_the_microsecond_grid():
     finally:
         receiver.close()
         sender.close()
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc", ".blf"])
+def test_can_fd_frames_keep_their_bytes_through_a_log_file(tmp_path, suffix):
+    from frictiond.busio import LogWriter, read_log
+    from frictiond.frames import Frame
+
+    frames = [Frame(1.0, 0xB0, bytes(range(16))), Frame(1.01, 0xC0, bytes(6)), Frame(1.02, 0xB0, bytes(range(1, 17)))]
+    path = tmp_path / f"fd{suffix}"
+    with LogWriter(path) as writer:
+        writer.write_all(frames)
+    back = list(read_log(path))
+    assert [(f.can_id, f.data) for f in back] == [(f.can_id, f.data) for f in frames]
+
+
+def test_a_socketcan_bus_is_opened_for_fd_when_inputs_are_fd(monkeypatch):
+    from frictiond import busio
+
+    seen = {}
+
+    def fake_bus(**kwargs):
+        seen.update(kwargs)
+        return SimpleNamespace(socket=None)
+
+    monkeypatch.setattr(busio.can, "Bus", fake_bus)
+    busio.open_bus("socketcan", "vcan0", [0xB0], fd=True)
+    assert seen["fd"] is True and seen["can_filters"] == [{"can_id": 0xB0, "can_mask": 0x7FF, "extended": False}]
+    seen.clear()
+    busio.open_bus("socketcan", "vcan0", [0xB0])
+    assert "fd" not in seen
+    seen.clear()
+    busio.open_bus("virtual", "x", [0xB0], fd=True)   # (its FD settings are its own)
+    assert "fd" not in seen

@@ -382,3 +382,14 @@ def test_valid_status_reaches_the_bus_through_a_vehicle_dbc(tmp_path):
     frames, _ = simulate_frames(config, "wet", seed=2)
     _, estimates = estimates_of(config, frames)
     assert any(e.status == Status.VALID for e in estimates)
+
+
+def test_inputs_longer_than_eight_bytes_are_can_fd(tmp_path):
+    classic = codec_for(make_config(tmp_path, wheels_msg() + ACCEL + PRESS, base_signals(), name="classic"))
+    assert classic.fd is False
+    long_wheels = wheels_msg().replace("BO_ 200 WHL: 8 ESC", "BO_ 200 WHL: 16 ESC")
+    fd = codec_for(make_config(tmp_path, long_wheels + ACCEL + PRESS, base_signals(), name="fd"))
+    assert fd.fd is True
+    msg = fd.db.get_message_by_name("WHL")
+    data = msg.encode({f"V_{w}": 12.5 for w in ("FL", "FR", "RL", "RR")})
+    assert len(data) == 16 and fd.decode(Frame(0.0, 200, data)).values["wheel_speed_rr"] == pytest.approx(12.5)

@@ -58,11 +58,11 @@ def scenario(vcan, name):
     return out, s
 
 
-def frictiond_replay(out: Path, log: Path) -> list:
+def frictiond_replay(out: Path, log: Path, config: str = "frictiond.yaml") -> list:
     """`frictiond replay LOG --output ...` (the CLI itself), its output frames."""
     target = out / f"{log.stem}.replayed.log"
     proc = subprocess.run(
-        [sys.executable, "-m", "frictiond.cli.main", "replay", str(log), "--config", str(out / "frictiond.yaml"),
+        [sys.executable, "-m", "frictiond.cli.main", "replay", str(log), "--config", str(out / config),
          "--output", str(target), "--quiet"],
         capture_output=True, text=True, timeout=300,
     )
@@ -147,14 +147,15 @@ def past_rate_guard(out: Path, name: str) -> tuple[Path, int]:
     return path, len(frames) - len(kept)
 
 
-def check_live_equals_replay(out: Path, name: str, codec, original: Path, against_log: bool = True) -> dict:
+def check_live_equals_replay(out: Path, name: str, codec, original: Path, against_log: bool = True,
+                             config: str = "frictiond.yaml") -> dict:
     full_capture = list(read_log(out / f"{name}-capture.log"))
     # (replayed: the frames the daemon processed, which are all of them unless canplayer, after a
     # stall, sent more wheel-speed frames back to back than the rate guard lets through)
     processed, _ = past_rate_guard(out, name)
     capture = list(read_log(processed))
     live = estimates(codec, read_log(out / f"{name}-est.log"))
-    from_capture = estimates(codec, frictiond_replay(out, processed))
+    from_capture = estimates(codec, frictiond_replay(out, processed, config))
     caused, ticks = trigger_caused(live, capture, {t for t, _, _ in from_capture})
     inputs_seen = [f for f in full_capture if f.can_id in INPUT_IDS]
     played = [f for f in read_log(original) if f.can_id in INPUT_IDS]
@@ -181,7 +182,7 @@ def check_live_equals_replay(out: Path, name: str, codec, original: Path, agains
     # the timing only to a few milliseconds in the slow guest (over 10 ms with a flood hogging its
     # one CPU), and the estimator's transient depends on the timestamps: statuses mostly agree, the
     # final estimate agrees within tolerance; the per-update differences are reported.
-    from_log = estimates(codec, frictiond_replay(out, original))
+    from_log = estimates(codec, frictiond_replay(out, original, config))
     # (Under the flood canplayer, starved of the guest's CPU, also sends some wheel-speed frames in
     # bursts 50 µs apart, which the front end skips as a gateway's repeats: a few updates fewer than
     # the log gives, the same as `frictiond replay` of the capture, which check 1 compares.)
@@ -283,6 +284,20 @@ def test_stopping_an_input_yields_input_stale_within_three_periods(vcan, codec):
     assert ticks[0][0] - last_trigger <= 3 * PERIOD_S + 0.03, ticks[0][0] - last_trigger
     print(f"stale: pressure stop -> INPUT_STALE after {first_stale[0] - last_pressure:.3f} s, "
           f"trigger stop -> tick INPUT_STALE after {ticks[0][0] - last_trigger:.3f} s")
+
+
+def test_can_fd_inputs_live_equal_frictiond_replay(vcan, codec):
+    """Wheel speeds as 16-byte CAN FD frames: the daemon opens its socket for FD (else it would
+    receive none of them) and gives what `frictiond replay` gives."""
+    out, s = scenario(vcan, "fd")
+    if "skipped" in s:
+        pytest.skip(s["skipped"])
+    assert s["rc"] == 0
+    triggers = [f for f in read_log(out / "fd-capture.log") if f.can_id == TRIGGER_ID]
+    assert triggers and all(len(f.data) == 16 for f in triggers)      # FD frames were on the bus
+    report = check_live_equals_replay(out, "fd", codec, out / "fd.log", config="fd.yaml")
+    assert report["updates"] >= 0.95 * len(triggers)
+    print("fd:", report)
 
 
 def test_suite_stays_within_its_time_budget(vcan):

@@ -66,6 +66,9 @@ def _do_check(args: argparse.Namespace) -> int:
         kind = f", multiplexed ({input_codec.pages(m.name)} pages)" if m.is_multiplexed else ""
         print(f"  {m.name:{mw}s} 0x{m.frame_id:03X}  {m.length} bytes  {_rate(m.period_s, 1)}{kind}  "
               + (f"alive counter {counter} checked" if counter else "no alive counter"), file=out)
+    if input_codec.fd:
+        print("CAN FD   some inputs are CAN FD frames: a socketcan bus is opened for FD "
+              "(another interface needs its own FD settings)", file=out)
     print(f"\ntrigger  {input_codec.trigger_message} (one estimator update per frame)", file=out)
     for partner, names in input_codec.wheel_partners.items():
         print(f"         {', '.join(names)} from {partner}: interpolated at each trigger frame's instant "

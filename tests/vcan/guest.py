@@ -9,6 +9,8 @@ Scenarios, each with a fresh `frictiond run`:
   flood     the same while cangen floods another ID (lowest priority, as fast as it can)
   linkdown  short.log, `ip link set vcan0 down`, wait, up, short.log again
   stale     stale.log (BRAKE_PRESSURES stops mid-way), then the trigger stops too
+  fd        fd.log (WHEEL_SPEEDS as 16-byte CAN FD frames) with fd.yaml, as replay; needs vcan0's
+            MTU at 72 (the guest sets it; a host's vcan0 without it: skipped)
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ def link_packets() -> dict[str, int]:
 
 
 class Daemon:
-    def __init__(self, out: Path, name: str) -> None:
+    def __init__(self, out: Path, name: str, config: str = "frictiond.yaml") -> None:
         self.name = name
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         address = f"frictiond-vcan-{name}-{os.getpid()}"
@@ -44,7 +46,7 @@ class Daemon:
         self.err = open(self.err_path, "w")
         started = time.monotonic()
         self.proc = subprocess.Popen(
-            [PY, "-m", "frictiond.cli.main", "-v", "run", "--config", str(out / "frictiond.yaml"),
+            [PY, "-m", "frictiond.cli.main", "-v", "run", "--config", str(out / config),
              "--estimate-log", str(out / f"{name}-est.log")],
             stderr=self.err, stdout=self.err, env=env,
         )
@@ -196,11 +198,25 @@ def scenario_stale(out: Path) -> dict:
     return {**d.summary(rc), "play_s": played}
 
 
+def scenario_fd(out: Path) -> dict:
+    mtu = int(Path(f"/sys/class/net/{IFACE}/mtu").read_text())
+    if mtu < 72:
+        return {"skipped": f"{IFACE} has MTU {mtu}: no CAN FD frames (ip link set {IFACE} mtu 72)"}
+    dump = Candump(out, "fd")
+    d = Daemon(out, "fd", "fd.yaml")
+    time.sleep(0.3)
+    played = play(out / "fd.log")
+    d.wait_idle()
+    rc = d.stop()
+    dump.stop()
+    return {**d.summary(rc), "play_s": played}
+
+
 def main(out: Path) -> int:
     results: dict = {"kernel": os.uname().release, "scenarios": {}}
     t0 = time.monotonic()
     for name, fn in (("replay", scenario_replay), ("flood", scenario_flood), ("linkdown", scenario_linkdown),
-                     ("stale", scenario_stale)):
+                     ("stale", scenario_stale), ("fd", scenario_fd)):
         started = time.monotonic()
         try:
             results["scenarios"][name] = fn(out)

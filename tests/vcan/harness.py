@@ -78,6 +78,25 @@ def _test_config(out: Path) -> Path:
     return path
 
 
+def _fd_config(out: Path, test_config: Path) -> Path:
+    """The test config with WHEEL_SPEEDS as a 16-byte CAN FD frame (fd.dbc, fd.yaml): a car whose
+    inputs need a socket opened for FD."""
+    from frictiond.config import default_config_path
+
+    dbc = (default_config_path().parent / "frictiond.dbc").read_text()
+    edits = [('BO_ 176 WHEEL_SPEEDS: 8 VEHICLE', 'BO_ 176 WHEEL_SPEEDS: 16 VEHICLE'),
+             (' SG_ WheelSpeed_RR : 48|16@1+', ' SG_ WheelSpeed_RR : 96|16@1+')]
+    for old, new in edits:
+        assert old in dbc, old
+        dbc = dbc.replace(old, new)
+    (out / "fd.dbc").write_text(dbc)
+    data = yaml.safe_load(test_config.read_text())
+    data["can"]["dbc"] = str(out / "fd.dbc")
+    path = out / "fd.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
 def _braking_frames(config) -> tuple[list, str]:
     """The simulator's dry braking if it is there, else the synthetic drive; a few seconds."""
     try:
@@ -112,6 +131,9 @@ def prepare(out: Path) -> dict:
         w.write_all(f for f in frames if not (f.can_id == PRESSURE_ID and f.time_s - t0 > STALE_CUT_S))
     with LogWriter(out / "short.log") as w:
         w.write_all(f for f in frames if f.time_s - t0 <= 1.0)
+    fd_frames, _ = _braking_frames(load_config(_fd_config(out, cfg_path)))
+    with LogWriter(out / "fd.log") as w:
+        w.write_all(fd_frames)
     info = {"source": source, "frames": len(frames), "seconds": frames[-1].time_s - t0, "config": str(cfg_path)}
     (out / "inputs.json").write_text(json.dumps(info))
     return info
@@ -131,7 +153,7 @@ insmod {m}/net/can/can.ko
 insmod {m}/net/can/can-raw.ko
 insmod {m}/drivers/net/can/dev/can-dev.ko
 insmod {m}/drivers/net/can/vcan.ko
-ip link add dev vcan0 type vcan && ip link set up vcan0
+ip link add dev vcan0 type vcan && ip link set vcan0 mtu 72 && ip link set up vcan0
 # as on a gateway with memory to spare: frictiond asks for a 1 MiB receive buffer
 echo 4194304 > /proc/sys/net/core/rmem_max
 cd {REPO}

@@ -136,7 +136,10 @@ class DecodedInput(NamedTuple):
 _new_tuple = tuple.__new__
 
 
-def _resolve_unit(name: str, source: SignalSource, dbc_unit: str, wheel_radius: float) -> tuple[str, float, str]:
+def _resolve_unit(name: str, source: SignalSource, dbc_unit: str, wheel_radius: float,
+                  list_units: bool = True) -> tuple[str, float, str]:
+    """(the unit, its factor to SI, a note) of a mapped input; `list_units`: a refusal names the
+    units known for its quantity (False where an earlier refusal of the same quantity did)."""
     quantity = _QUANTITY[name]
     table = _UNITS[quantity]
     declared = source.unit if source.unit is not None else dbc_unit
@@ -148,9 +151,10 @@ def _resolve_unit(name: str, source: SignalSource, dbc_unit: str, wheel_radius: 
         note = f"no unit in DBC; assumed {CANONICAL_UNIT[quantity]}"
     if key not in lookup:
         where = "signals." + name + ".unit" if source.unit is not None else f"DBC unit of {source.message}.{source.signal}"
+        known = ", ".join(table) if list_units else "those named above"
         raise ConfigError(
             f"signals.{name}: {where} {declared!r} is not a {quantity.replace('_', ' ')} unit "
-            f"(use one of {', '.join(table)}; set signals.{name}.unit to override)"
+            f"(use one of {known}; set signals.{name}.unit to override)"
         )
     factor = lookup[key]
     if factor is None:  # ground speed of the wheel → angular speed
@@ -162,6 +166,7 @@ def resolve_signals(db: Database, signals: Mapping[str, SignalSource], wheel_rad
     """Bind every mapped input to its DBC signal; one `ConfigError` line names every missing piece."""
     resolved = []
     problems: list[str] = []
+    units_listed: set[str] = set()
     for name, source in signals.items():
         try:
             message = db.get_message_by_name(source.message)
@@ -175,9 +180,11 @@ def resolve_signals(db: Database, signals: Mapping[str, SignalSource], wheel_rad
             continue
         dbc_unit = signal.unit or ""
         try:
-            unit, factor, note = _resolve_unit(name, source, dbc_unit, wheel_radius)
+            unit, factor, note = _resolve_unit(name, source, dbc_unit, wheel_radius,
+                                               list_units=_QUANTITY[name] not in units_listed)
         except ConfigError as exc:
             problems.append(str(exc))
+            units_listed.add(_QUANTITY[name])   # (four wheels, one list: the line stays short)
             continue
         mux = tuple(signal.multiplexer_ids) if signal.multiplexer_ids else None
         resolved.append(

@@ -133,15 +133,20 @@ def play(log: Path) -> float:
     return time.monotonic() - started
 
 
-def scenario_replay(out: Path) -> dict:
-    dump = Candump(out, "replay")
-    d = Daemon(out, "replay")
+def recorded_play(out: Path, name: str, log: str, config: str = "frictiond.yaml") -> dict:
+    """A fresh daemon and candump while canplayer plays `log`: the scenario's summary."""
+    dump = Candump(out, name)
+    d = Daemon(out, name, config)
     time.sleep(0.3)
-    played = play(out / "braking.log")
+    played = play(out / log)
     d.wait_idle()
     rc = d.stop()
     dump.stop()
     return {**d.summary(rc), "play_s": played}
+
+
+def scenario_replay(out: Path) -> dict:
+    return recorded_play(out, "replay", "braking.log")
 
 
 def scenario_flood(out: Path) -> dict:
@@ -188,28 +193,14 @@ def scenario_linkdown(out: Path) -> dict:
 
 
 def scenario_stale(out: Path) -> dict:
-    dump = Candump(out, "stale")
-    d = Daemon(out, "stale")
-    time.sleep(0.3)
-    played = play(out / "stale.log")
-    d.wait_idle()
-    rc = d.stop()
-    dump.stop()
-    return {**d.summary(rc), "play_s": played}
+    return recorded_play(out, "stale", "stale.log")
 
 
 def scenario_fd(out: Path) -> dict:
     mtu = int(Path(f"/sys/class/net/{IFACE}/mtu").read_text())
     if mtu < 72:
         return {"skipped": f"{IFACE} has MTU {mtu}: no CAN FD frames (ip link set {IFACE} mtu 72)"}
-    dump = Candump(out, "fd")
-    d = Daemon(out, "fd", "fd.yaml")
-    time.sleep(0.3)
-    played = play(out / "fd.log")
-    d.wait_idle()
-    rc = d.stop()
-    dump.stop()
-    return {**d.summary(rc), "play_s": played}
+    return recorded_play(out, "fd", "fd.log", "fd.yaml")
 
 
 def main(out: Path) -> int:

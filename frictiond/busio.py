@@ -307,10 +307,11 @@ class LogWriter:
 
 
 def open_bus(interface: str, channel: str, receive_ids: Iterable[int] | None = None, fd: bool = False,
-             **kwargs: Any) -> can.BusABC:
+             extended_ids: Iterable[int] = (), **kwargs: Any) -> can.BusABC:
     """Open a python-can bus, ignoring stray can.conf files and CAN_* environment settings.
 
-    `receive_ids` become exact-match kernel filters on SocketCAN (software filters elsewhere).
+    `receive_ids` become exact-match kernel filters on SocketCAN (software filters elsewhere), as
+    11-bit IDs; those also in `extended_ids` as 29-bit ones too.
     `fd`: some inputs are CAN FD frames; a SocketCAN socket is then opened for FD (it receives
     classic frames as well). Other interfaces take their FD settings (data bitrate, timing)
     from their own keyword arguments, which a config cannot give: there it is left to them.
@@ -319,7 +320,9 @@ def open_bus(interface: str, channel: str, receive_ids: Iterable[int] | None = N
         kwargs["fd"] = True
     filters = None
     if receive_ids is not None:
-        filters = [{"can_id": cid, "can_mask": 0x7FF, "extended": False} for cid in sorted(set(receive_ids))]
+        ids = sorted(set(receive_ids))
+        filters = [{"can_id": cid, "can_mask": 0x7FF, "extended": False} for cid in ids]
+        filters += [{"can_id": cid, "can_mask": 0x1FFFFFFF, "extended": True} for cid in sorted(set(extended_ids))]
     bus = can.Bus(channel=channel, interface=interface, can_filters=filters, ignore_config=True, **kwargs)
     _enlarge_receive_buffer(bus)
     return bus

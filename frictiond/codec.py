@@ -5,18 +5,20 @@ docs/architecture.md (rad/s, m/s², rad/s, bar, m/s, N·m), whatever the vehicle
 """
 from __future__ import annotations
 
+import logging
 import math
 import struct
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, NamedTuple, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, NamedTuple, Sequence
 
 import cantools
 from cantools.database import Database
 
 from .config import ConfigError, SignalSource
 from .e2e import E2EChecker, protect
-from .frames import Frame
+from .frames import EXTENDED_KEY, Frame, frame_key
 from .input_names import OPTIONAL_INPUTS, REQUIRED_INPUTS
 from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
 
@@ -73,13 +75,21 @@ class DecodeFailure(Exception):
         self.reason = reason
 
 
+def _not_an_overwrite(record: logging.LogRecord) -> bool:
+    """cantools' warning that a message replaced another of the same ID in its ID table: the codec
+    finds such a pair itself where it matters (both mapped: a `ConfigError` naming them) and keys
+    its inputs by ID and name, so it is no news to a user (and no second line to a config error)."""
+    return not str(record.msg).startswith("Overwriting message")
+
+
 def load_databases(paths: Sequence[Path | str], strict: bool = True) -> Database:
     """Load one or several DBC files into one database; `ConfigError` names the bad file."""
     db = Database(strict=strict)
     for path in paths:
         path = Path(path)
         try:
-            db.add_dbc_file(str(path))
+            with _filtered(logging.getLogger("cantools.database.can.database"), _not_an_overwrite):
+                db.add_dbc_file(str(path))
         except FileNotFoundError:
             raise ConfigError(f"{path}: no such DBC file") from None
         except (OSError, UnicodeDecodeError) as exc:
@@ -91,6 +101,15 @@ def load_databases(paths: Sequence[Path | str], strict: bool = True) -> Database
     if not db.messages:
         raise ConfigError(f"{', '.join(map(str, paths))}: DBC defines no messages")
     return db
+
+
+@contextmanager
+def _filtered(logger: logging.Logger, keep: Callable[[logging.LogRecord], bool]) -> Iterator[None]:
+    logger.addFilter(keep)
+    try:
+        yield
+    finally:
+        logger.removeFilter(keep)
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,6 +143,8 @@ class InputMessage(NamedTuple):
     signals: tuple[str, ...]     # canonical names carried
     length: int
     is_multiplexed: bool
+    is_extended: bool = False    # a 29-bit ID
+
 
 
 class DecodedInput(NamedTuple):
@@ -248,13 +269,16 @@ def _scaler(conversion: Any) -> tuple[bool, Any, Any]:
 class _MessagePlan:
     """Everything needed to decode one input message quickly."""
 
-    __slots__ = ("message", "name", "frame_id", "length", "signals", "is_trigger", "check_range", "to_si", "fields",
+    __slots__ = ("message", "name", "frame_id", "is_extended", "key", "length", "signals", "is_trigger", "check_range",
+                 "to_si", "fields",
                  "compiled")
 
     def __init__(self, message: Any, signals: list[ResolvedSignal], is_trigger: bool) -> None:
         self.message = message
         self.name = message.name
         self.frame_id = message.frame_id
+        self.is_extended = bool(message.is_extended_frame)
+        self.key = frame_key(self.frame_id, self.is_extended)
         self.length = message.length
         self.signals = signals
         self.is_trigger = is_trigger
@@ -348,24 +372,27 @@ class InputCodec:
         self._plans: dict[int, _MessagePlan] = {}
         for name, sigs in by_message.items():
             message = db.get_message_by_name(name)
-            if message.is_extended_frame:
-                raise ConfigError(f"signals: message {name!r} uses an extended (29-bit) ID; only 11-bit inputs are supported")
-            if message.frame_id in self._plans:
-                raise ConfigError(f"signals: two mapped messages share frame ID 0x{message.frame_id:X}")
+            key = frame_key(message.frame_id, bool(message.is_extended_frame))
+            if key in self._plans:
+                raise ConfigError(f"signals: two mapped messages share frame ID 0x{message.frame_id:X}: "
+                                  f"{self._plans[key].name!r} and {name!r}")
             if name in self.wheel_partners and message.is_multiplexed():
                 raise ConfigError(
                     f"signals: wheel speeds from message {name!r}, which is multiplexed: wheel speeds that come "
                     f"apart from {self.trigger_message!r} (the message of wheel_speed_fl) must be whole in every frame")
-            self._plans[message.frame_id] = _MessagePlan(message, sigs, name == self.trigger_message)
-        self.input_ids: frozenset[int] = frozenset(self._plans)
+            self._plans[key] = _MessagePlan(message, sigs, name == self.trigger_message)
+        # The inputs' IDs as numbers (a first cheap test of a frame), and those sent as 29-bit IDs.
+        self.input_ids: frozenset[int] = frozenset(p.frame_id for p in self._plans.values())
+        self.extended_input_ids: frozenset[int] = frozenset(p.frame_id for p in self._plans.values() if p.is_extended)
         # Inputs sent as CAN FD frames (the DBC says so, or they carry more than 8 bytes): a
         # SocketCAN socket receives them only when opened for FD (`busio.open_bus`).
         self.fd = any(bool(getattr(p.message, "is_fd", False)) or p.length > 8 for p in self._plans.values())
-        self.trigger_id = next(p.frame_id for p in self._plans.values() if p.is_trigger)
+        trigger_plan = next(p for p in self._plans.values() if p.is_trigger)
+        self.trigger_id, self.trigger_extended = trigger_plan.frame_id, trigger_plan.is_extended
         self.counter_jumps = 0
-        self._counter_signals = {
-            fid: next((s for s in p.message.signals if _is_counter_name(s.name) and not s.multiplexer_ids), None)
-            for fid, p in self._plans.items()
+        self._counter_signals = {   # (by the plans' keys, as the counters below)
+            key: next((s for s in p.message.signals if _is_counter_name(s.name) and not s.multiplexer_ids), None)
+            for key, p in self._plans.items()
         }
         for fid, plan in self._plans.items():
             plan.compile(self._counter_signals.get(fid))
@@ -376,7 +403,7 @@ class InputCodec:
     def counter_signal(self, message: str) -> str | None:
         """Name of the alive counter checked in an input message (None: the message has none)."""
         plan = next(p for p in self._plans.values() if p.name == message)
-        signal = self._counter_signals.get(plan.frame_id)
+        signal = self._counter_signals.get(plan.key)
         return signal.name if signal is not None else None
 
     def pages(self, message: str) -> int:
@@ -391,7 +418,8 @@ class InputCodec:
             cycle = plan.message.cycle_time
             out.append(
                 InputMessage(plan.name, plan.frame_id, cycle / 1000.0 if cycle else None,
-                             tuple(s.name for s in plan.signals), plan.length, plan.message.is_multiplexed())
+                             tuple(s.name for s in plan.signals), plan.length, plan.message.is_multiplexed(),
+                             plan.is_extended)
             )
         return out
 
@@ -401,8 +429,8 @@ class InputCodec:
         Raises `DecodeFailure` for input frames that cannot be trusted (wrong length, a mapped
         signal outside its DBC range or not finite).
         """
-        plan = self._plans.get(frame.can_id)
-        if plan is None or frame.is_extended:
+        plan = self._plans.get(frame.can_id | EXTENDED_KEY if frame.is_extended else frame.can_id)
+        if plan is None:
             return None
         data = frame.data
         if len(data) != plan.length:
@@ -412,7 +440,7 @@ class InputCodec:
             if decoded is not None:
                 values, counter = decoded
                 if counter is not None:
-                    self._count(frame.can_id, counter)
+                    self._count(plan.key, counter)
                 # (tuple.__new__: the NamedTuple without its Python-level __new__, a frame per input)
                 return _new_tuple(DecodedInput, (frame.time_s, plan.name, values, plan.is_trigger))
             # Refused (a range or a value): the Python path below says why.
@@ -424,7 +452,7 @@ class InputCodec:
             except Exception as exc:  # bad multiplexer value, truncated, ...
                 raise DecodeFailure("undecodable", f"{plan.name}: {exc}") from None
         # The counter says whether frames were lost on the bus, even if we refuse this one's values.
-        self._check_counter(frame.can_id, raw)
+        self._check_counter(plan.key, raw)
         for s, low, high in plan.check_range:
             value = raw.get(s.signal)
             if value is not None and not low <= value <= high:
@@ -441,20 +469,21 @@ class InputCodec:
             values[name] = v
         return DecodedInput(frame.time_s, plan.name, values, plan.is_trigger)
 
-    def _check_counter(self, frame_id: int, raw: Mapping[str, Any]) -> None:
-        signal = self._counter_signals.get(frame_id)
+    def _check_counter(self, key: int, raw: Mapping[str, Any]) -> None:
+        signal = self._counter_signals.get(key)
         if signal is None:
             return
         value = raw.get(signal.name)
         if value is not None:
-            self._count(frame_id, value)
+            self._count(key, value)
 
-    def _count(self, frame_id: int, value: Any) -> None:
-        """Counts a jump of a message's alive counter (value: the counter signal's value)."""
-        signal = self._counter_signals[frame_id]
+    def _count(self, key: int, value: Any) -> None:
+        """Counts a jump of a message's alive counter (`key`: `frame_key` of the message; value:
+        the counter signal's value)."""
+        signal = self._counter_signals[key]
         counter = int(value)
-        last = self._last_counter.get(frame_id)
-        self._last_counter[frame_id] = counter
+        last = self._last_counter.get(key)
+        self._last_counter[key] = counter
         modulo = 1 << signal.length
         if last is not None and (counter - last) % modulo not in (1,):
             self.counter_jumps += 1
@@ -473,9 +502,9 @@ class InputCodec:
             # the first mapped one (config order, FL first) sets it.
             page.setdefault(s.signal, s.from_si(values[s.name]))
         payloads = []
-        counter_signal = self._counter_signals.get(plan.frame_id)
-        counter = self._encode_counters.get(plan.frame_id, 0)
-        self._encode_counters[plan.frame_id] = counter + 1
+        counter_signal = self._counter_signals.get(plan.key)
+        counter = self._encode_counters.get(plan.key, 0)
+        self._encode_counters[plan.key] = counter + 1
         if counter_signal is not None:
             counter %= 1 << counter_signal.length
         for mux_id, page in pages.items():
@@ -864,7 +893,8 @@ def validate_against_dbc(config: Any) -> tuple[InputCodec, OutputCodec]:
     input_codec = InputCodec(load_databases(config.can.dbc, strict=config.can.dbc_strict), config.signals,
                              config.vehicle.wheel_radius)
     output_codec = OutputCodec(load_databases([config.can.output_dbc], strict=True))
-    overlap = input_codec.input_ids & {output_codec.estimate_id, output_codec.wheel_id}
+    standard_inputs = {m.frame_id for m in input_codec.input_messages() if not m.is_extended}
+    overlap = standard_inputs & {output_codec.estimate_id, output_codec.wheel_id}   # (the outputs are 11-bit)
     if overlap:
         raise ConfigError(f"signals: input message ID 0x{min(overlap):X} collides with frictiond's output frames")
     return input_codec, output_codec

@@ -154,7 +154,7 @@ def _spoof(frames: list[Frame], codec: InputCodec, rate: float, seed: int) -> tu
         while t < start + 0.2 and len(spoofed) < wanted:
             while k + 1 < len(own) and own[k + 1].time_s <= t - 0.5:
                 k += 1
-            spoofed.append(Frame(t, target, own[k].data))
+            spoofed.append(own[k]._replace(time_s=t))
             t += period
     merged = sorted(frames + spoofed, key=lambda f: f.time_s)
     return merged, len(spoofed)

@@ -174,6 +174,7 @@ class Daemon(DaemonBus, DaemonReload, DaemonStatus):
         cfg = self.config
         pipeline = self.pipeline
         self.trigger_id = pipeline.input_codec.trigger_id
+        self.trigger_extended = pipeline.input_codec.trigger_extended
         self.guard = RateGuard(cfg.daemon.max_update_rate)
         period = pipeline.front_end.period_of(pipeline.trigger_message)
         self.tick_interval_s = max(0.005, min(period / 2.0, 0.05))

@@ -48,9 +48,12 @@ class DaemonBus:
         cfg = self.config.can
         kwargs = {"bitrate": cfg.bitrate} if cfg.bitrate else {}
         try:
-            if self.pipeline.input_codec.fd:
+            codec = self.pipeline.input_codec
+            if codec.fd:
                 kwargs["fd"] = True
-            self.bus = self._bus_factory(cfg.interface, cfg.channel, self.pipeline.input_codec.input_ids, **kwargs)
+            if codec.extended_input_ids:
+                kwargs["extended_ids"] = codec.extended_input_ids
+            self.bus = self._bus_factory(cfg.interface, cfg.channel, codec.input_ids, **kwargs)
         except (NotImplementedError, ImportError, TypeError) as exc:   # incl. CanInterfaceNotImplementedError
             raise StartupError(f"can.interface: cannot use {cfg.interface!r}: {exc}") from None
         except (can.CanError, OSError, ValueError) as exc:
@@ -100,7 +103,7 @@ class DaemonBus:
             self.stats.rx_frames += 1
             self._last_rx_time = frame.time_s
             self._last_rx_mono = self._mono()
-            if frame.can_id == self.trigger_id and not frame.is_extended and not frame.is_remote:
+            if frame.can_id == self.trigger_id and frame.is_extended == self.trigger_extended and not frame.is_remote:
                 if not self.guard.allow(frame.time_s):
                     self.stats.flood_dropped += 1
                     if self.stats.flood_dropped == 1:

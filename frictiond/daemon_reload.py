@@ -59,7 +59,9 @@ class DaemonReload:
             log.info("estimator changed with the reload: starting from its nominal prior")
         bus_changed = (new.can.interface, new.can.channel, new.can.bitrate) != (
             old.can.interface, old.can.channel, old.can.bitrate) or (
-            pipeline.input_codec.input_ids != self.pipeline.input_codec.input_ids)
+            (pipeline.input_codec.input_ids, pipeline.input_codec.extended_input_ids, pipeline.input_codec.fd)
+            != (self.pipeline.input_codec.input_ids, self.pipeline.input_codec.extended_input_ids,
+                self.pipeline.input_codec.fd))
         log_changed = (new.output.estimate_log, new.output.estimate_log_max_bytes, new.output.estimate_log_backups) != (
             old.output.estimate_log, old.output.estimate_log_max_bytes, old.output.estimate_log_backups)
         self.save_state()

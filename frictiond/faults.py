@@ -91,7 +91,7 @@ def spoof_flood(frames, codec: InputCodec, start_s: float, end_s: float, rate_hz
     while t < end_s:
         speed = rng.uniform(20.0, 90.0)
         payloads = codec.encode_input(trigger.name, {n: speed for n in trigger.signals})
-        spoofed.append(Frame(t, codec.trigger_id, payloads[0]))
+        spoofed.append(Frame(t, codec.trigger_id, payloads[0], codec.trigger_extended))
         t += 1.0 / rate_hz
     return sorted(list(frames) + spoofed, key=lambda f: f.time_s)
 

@@ -23,7 +23,7 @@ from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator, Sequence
 
-from .frames import Frame
+from .frames import EXTENDED_KEY, Frame, frame_key
 from .samples import WHEELS, Status
 
 RATE_WINDOW_S = 1.0
@@ -194,7 +194,8 @@ class MonitorModel:
                                     {m.name: (m.period_s or 0.01) for m in (input_messages or ())})
         self.inputs: dict[int, RateTracker] = {}
         for m in sorted(input_messages or (), key=lambda m: m.frame_id):
-            self.inputs[int(m.frame_id)] = RateTracker(m.name, int(m.frame_id), m.period_s)
+            key = frame_key(int(m.frame_id), bool(getattr(m, "is_extended", False)))
+            self.inputs[key] = RateTracker(m.name, int(m.frame_id), m.period_s)
         est_msg, wheel_msg = output_codec.estimate_message, output_codec.wheel_message
         self.outputs: dict[int, RateTracker] = {
             output_codec.estimate_id: RateTracker(est_msg.name, output_codec.estimate_id,
@@ -236,7 +237,7 @@ class MonitorModel:
         if not frame.is_extended and cid in self.outputs:
             self.outputs[cid].seen(frame.time_s)
             return self._feed_output(frame)
-        tracker = None if frame.is_extended else self.inputs.get(cid)
+        tracker = self.inputs.get(cid | EXTENDED_KEY if frame.is_extended else cid)
         if tracker is None:
             self.other_frames += 1
             return None

@@ -23,7 +23,7 @@ def schedules_for(codec: InputCodec) -> list[MessageSchedule]:
 
 def events_to_frames(codec: InputCodec, events: Iterable, time_offset_s: float = 0.0) -> Iterator[Frame]:
     """One frame per event; a multiplexed message sends its pages in turn, one per event."""
-    ids = {m.name: m.frame_id for m in codec.input_messages()}
+    ids = {m.name: (m.frame_id, m.is_extended) for m in codec.input_messages()}
     page_counter: dict[str, int] = {}
     for ev in events:
         payloads = codec.encode_input(ev.message, ev.values)
@@ -31,7 +31,8 @@ def events_to_frames(codec: InputCodec, events: Iterable, time_offset_s: float =
             continue
         k = page_counter.get(ev.message, 0)
         page_counter[ev.message] = k + 1
-        yield Frame(ev.time_s + time_offset_s, ids[ev.message], payloads[k % len(payloads)])
+        frame_id, extended = ids[ev.message]
+        yield Frame(ev.time_s + time_offset_s, frame_id, payloads[k % len(payloads)], extended)
 
 
 def simulate_frames(

@@ -96,3 +96,14 @@ def test_a_socketcan_bus_is_opened_for_fd_when_inputs_are_fd(monkeypatch):
     seen.clear()
     busio.open_bus("virtual", "x", [0xB0], fd=True)   # (its FD settings are its own)
     assert "fd" not in seen
+
+
+def test_29_bit_inputs_get_29_bit_kernel_filters(monkeypatch):
+    from frictiond import busio
+
+    seen = {}
+    monkeypatch.setattr(busio.can, "Bus", lambda **kwargs: seen.update(kwargs) or SimpleNamespace(socket=None))
+    busio.open_bus("socketcan", "vcan0", [0xB0, 0xC0], extended_ids=[0xC0])
+    assert seen["can_filters"] == [{"can_id": 0xB0, "can_mask": 0x7FF, "extended": False},
+                                   {"can_id": 0xC0, "can_mask": 0x7FF, "extended": False},
+                                   {"can_id": 0xC0, "can_mask": 0x1FFFFFFF, "extended": True}]

@@ -393,3 +393,14 @@ def test_inputs_longer_than_eight_bytes_are_can_fd(tmp_path):
     msg = fd.db.get_message_by_name("WHL")
     data = msg.encode({f"V_{w}": 12.5 for w in ("FL", "FR", "RL", "RR")})
     assert len(data) == 16 and fd.decode(Frame(0.0, 200, data)).values["wheel_speed_rr"] == pytest.approx(12.5)
+
+
+def test_29_bit_inputs_are_read_and_an_11_bit_frame_of_the_same_number_is_not(tmp_path):
+    extended_wheels = wheels_msg().replace("BO_ 200 WHL:", f"BO_ {0x80000000 | 200} WHL:")
+    path = make_config(tmp_path, extended_wheels + ACCEL + PRESS, base_signals())
+    codec = codec_for(path)
+    assert codec.extended_input_ids == {200} and codec.trigger_extended
+    data = codec.db.get_message_by_name("WHL").encode({f"V_{w}": 10.0 for w in ("FL", "FR", "RL", "RR")})
+    assert codec.decode(Frame(0.0, 200, data, True)).values["wheel_speed_fl"] == pytest.approx(10.0)
+    assert codec.decode(Frame(0.0, 200, data, False)) is None
+    assert "0x000000C8 (29-bit)" in check_config(path).stdout

@@ -286,15 +286,18 @@ def test_stopping_an_input_yields_input_stale_within_three_periods(vcan, codec):
           f"trigger stop -> tick INPUT_STALE after {ticks[0][0] - last_trigger:.3f} s")
 
 
-def test_can_fd_inputs_live_equal_frictiond_replay(vcan, codec):
-    """Wheel speeds as 16-byte CAN FD frames: the daemon opens its socket for FD (else it would
-    receive none of them) and gives what `frictiond replay` gives."""
+def test_can_fd_and_29_bit_inputs_live_equal_frictiond_replay(vcan, codec):
+    """Wheel speeds as 16-byte CAN FD frames and accelerations on a 29-bit ID: the daemon opens its
+    socket for FD and filters the 29-bit ID (else it would receive none of either) and gives what
+    `frictiond replay` gives."""
     out, s = scenario(vcan, "fd")
     if "skipped" in s:
         pytest.skip(s["skipped"])
     assert s["rc"] == 0
-    triggers = [f for f in read_log(out / "fd-capture.log") if f.can_id == TRIGGER_ID]
+    capture = list(read_log(out / "fd-capture.log"))
+    triggers = [f for f in capture if f.can_id == TRIGGER_ID]
     assert triggers and all(len(f.data) == 16 for f in triggers)      # FD frames were on the bus
+    assert all(f.is_extended for f in capture if f.can_id == 0xC0)   # ... and 29-bit ones
     report = check_live_equals_replay(out, "fd", codec, out / "fd.log", config="fd.yaml")
     assert report["updates"] >= 0.95 * len(triggers)
     print("fd:", report)

@@ -8,7 +8,9 @@ import can
 import cantools
 import numpy as np
 import pytest
+import yaml
 
+from frictiond.busio import LogWriter, read_log
 from frictiond.codec import validate_against_dbc
 from frictiond.config import load_config
 from frictiond.evaluation import evaluate
@@ -158,3 +160,35 @@ def test_multiplexed_wheel_pressures_cost_no_accuracy():
         _, estimates = estimates_of(config, frames)
         maes[path] = evaluate(estimates, sim.truth.rows()).mae
     assert abs(maes[EXAMPLE] - maes[DEFAULT]) < 0.015, maes
+
+
+def test_29_bit_and_can_fd_inputs_through_a_log_are_as_accurate_as_the_default_layout(tmp_path):
+    """The project's DBC with its wheel speeds as 16-byte CAN FD frames and its accelerations on a
+    29-bit ID, through a candump log and back: the same estimate as the default layout's."""
+    dbc = (REPO / "dbc" / "frictiond.dbc").read_text()
+    for old, new in (("BO_ 176 WHEEL_SPEEDS: 8 VEHICLE", "BO_ 176 WHEEL_SPEEDS: 16 VEHICLE"),
+                     (" SG_ WheelSpeed_RR : 48|16@1+", " SG_ WheelSpeed_RR : 96|16@1+"),
+                     ("BO_ 192 ACCELERATIONS:", f"BO_ {0x80000000 | 0x18FF10C0} ACCELERATIONS:")):
+        assert old in dbc
+        dbc = dbc.replace(old, new)
+    (tmp_path / "car.dbc").write_text(dbc)
+    data = yaml.safe_load(DEFAULT.read_text())
+    data["can"]["dbc"] = "car.dbc"
+    path = write_config(tmp_path, data)
+    maes = {}
+    for cfg in (DEFAULT, path):
+        config = load_config(cfg)
+        frames, sim = simulate_frames(config, "dry", seed=4)
+        log = tmp_path / f"{cfg.stem}.log"
+        with LogWriter(log) as writer:
+            writer.write_all(frames)
+        played = list(read_log(log))
+        if cfg == path:
+            accel = [f for f in played if f.can_id == 0x18FF10C0]
+            assert accel and all(f.is_extended for f in accel)
+            assert {len(f.data) for f in played if f.can_id == 0xB0} == {16}
+            assert Pipeline(config).input_codec.fd
+        pipeline, estimates = estimates_of(config, played)
+        assert pipeline.stats.undecodable_total == 0 and pipeline.stats.ignored_frames == 0
+        maes[cfg] = evaluate(estimates, sim.truth.rows()).mae
+    assert abs(maes[path] - maes[DEFAULT]) < 0.005, maes

@@ -340,12 +340,13 @@ def encode_frames(spec: StopSpec, trace: Trace, dbc_path: Path) -> list[Frame]:
     """The stop's input frames through its DBC and signal map (the codec frictiond decodes with)."""
     config = parse_config(config_data(spec, dbc_path), None)
     codec = InputCodec(load_databases([dbc_path]), config.signals, config.vehicle.wheel_radius)
-    ids = {m.name: m.frame_id for m in codec.input_messages()}
+    ids = {m.name: (m.frame_id, m.is_extended) for m in codec.input_messages()}
     rng = np.random.default_rng([spec.seed, 7])
     frames = []
     for ev in sensor_events(spec.sensors, trace, config.vehicle.wheel_radius, rng):
         payloads = codec.encode_input(ev.message, ev.values)
-        frames.append(Frame(ev.time_s, ids[ev.message], payloads[0]))
+        frame_id, extended = ids[ev.message]
+        frames.append(Frame(ev.time_s, frame_id, payloads[0], extended))
     return frames
 
 

@@ -64,7 +64,8 @@ def _do_check(args: argparse.Namespace) -> int:
     for m in sorted(messages.values(), key=lambda m: m.frame_id):
         counter = input_codec.counter_signal(m.name)
         kind = f", multiplexed ({input_codec.pages(m.name)} pages)" if m.is_multiplexed else ""
-        print(f"  {m.name:{mw}s} 0x{m.frame_id:03X}  {m.length} bytes  {_rate(m.period_s, 1)}{kind}  "
+        ident = f"0x{m.frame_id:08X} (29-bit)" if m.is_extended else f"0x{m.frame_id:03X}"
+        print(f"  {m.name:{mw}s} {ident}  {m.length} bytes  {_rate(m.period_s, 1)}{kind}  "
               + (f"alive counter {counter} checked" if counter else "no alive counter"), file=out)
     if input_codec.fd:
         print("CAN FD   some inputs are CAN FD frames: a socketcan bus is opened for FD "

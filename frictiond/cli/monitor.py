@@ -122,7 +122,7 @@ def _bus_source(args: argparse.Namespace, config: Any, input_codec: Any, output_
     if config.can.bitrate and interface not in ("socketcan", "virtual"):
         kwargs["bitrate"] = config.can.bitrate
     try:
-        bus = open_bus(interface, channel, ids, fd=input_codec.fd, **kwargs)
+        bus = open_bus(interface, channel, ids, fd=input_codec.fd, extended_ids=input_codec.extended_input_ids, **kwargs)
     except Exception as exc:  # python-can raises CanError, OSError, ValueError, ImportError...
         return fail(f"cannot open {interface} channel {channel}: {exc}", EXIT_UNAVAILABLE)
     return BusSource(bus, message_to_frame, description=f"{interface} {channel}"), channel, bus

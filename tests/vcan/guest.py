@@ -9,7 +9,8 @@ Scenarios, each with a fresh `frictiond run`:
   flood     the same while cangen floods another ID (lowest priority, as fast as it can)
   linkdown  short.log, `ip link set vcan0 down`, wait, up, short.log again
   stale     stale.log (BRAKE_PRESSURES stops mid-way), then the trigger stops too
-  fd        fd.log (WHEEL_SPEEDS as 16-byte CAN FD frames) with fd.yaml, as replay; needs vcan0's
+  fd        fd.log (WHEEL_SPEEDS as 16-byte CAN FD frames, ACCELERATIONS on a 29-bit ID) with
+            fd.yaml, as replay; needs vcan0's
             MTU at 72 (the guest sets it; a host's vcan0 without it: skipped)
 """
 from __future__ import annotations

@@ -79,13 +79,14 @@ def _test_config(out: Path) -> Path:
 
 
 def _fd_config(out: Path, test_config: Path) -> Path:
-    """The test config with WHEEL_SPEEDS as a 16-byte CAN FD frame (fd.dbc, fd.yaml): a car whose
-    inputs need a socket opened for FD."""
+    """The test config with WHEEL_SPEEDS as a 16-byte CAN FD frame and ACCELERATIONS on the 29-bit
+    ID 0xC0 (fd.dbc, fd.yaml): a car whose inputs need a socket opened for FD, and 29-bit filters."""
     from frictiond.config import default_config_path
 
     dbc = (default_config_path().parent / "frictiond.dbc").read_text()
     edits = [('BO_ 176 WHEEL_SPEEDS: 8 VEHICLE', 'BO_ 176 WHEEL_SPEEDS: 16 VEHICLE'),
-             (' SG_ WheelSpeed_RR : 48|16@1+', ' SG_ WheelSpeed_RR : 96|16@1+')]
+             (' SG_ WheelSpeed_RR : 48|16@1+', ' SG_ WheelSpeed_RR : 96|16@1+'),
+             ('BO_ 192 ACCELERATIONS:', f'BO_ {0x80000000 | 0xC0} ACCELERATIONS:')]
     for old, new in edits:
         assert old in dbc, old
         dbc = dbc.replace(old, new)

@@ -26,6 +26,10 @@ class DaemonStatus:
             parts.append(f"{st.flood_dropped} flood frames dropped")
         if st.tx_dropped:
             parts.append(f"{st.tx_dropped} tx dropped")
+        join = self.pipeline.wheel_join
+        if join is not None and join.dropped:
+            silent, _n = join.dropped_by.most_common(1)[0]
+            parts.append(f"{join.dropped} wheel-speed frames without {silent or 'the other wheel speeds'}")
         if self.pipeline.stats.error_frames:
             parts.append(f"{self.pipeline.stats.error_frames} error frames")
         return ", ".join(parts)

@@ -47,6 +47,9 @@ class ReplaySummary:
     rejected: dict = field(default_factory=dict)   # input frames the plausibility gate refused, by kind
     suspect_share: float = 0.0        # ... and its share of rejected/repaired input at the end
     relaxation_m: float = 0.0         # the tyre's relaxation length learnt (`relaxation`)
+    # Wheel-speed frames that gave no update: a message carrying other wheels' speeds was silent
+    # around them (`wheel_speed_join`), by that message.
+    unjoined: dict = field(default_factory=dict)
 
     @property
     def update_period_s(self) -> float:
@@ -84,6 +87,11 @@ class ReplaySummary:
             lines.append(f"rejected input    {sum(self.rejected.values())}  (implausible frames, kept from the fit"
                          + "".join(f"; {k}: {v}" for k, v in sorted(self.rejected.items(), key=lambda kv: (-kv[1], kv[0])))
                          + ")")
+        if self.unjoined:
+            lines.append(f"unjoined          {sum(self.unjoined.values())} wheel-speed frames gave no update: "
+                         + "; ".join(f"{k or 'another wheel-speed message'} silent around {v} of them"
+                                     for k, v in sorted(self.unjoined.items()))
+                         + " (its wheels' speeds not known at their instants)")
         if self.relaxation_m > 0.0:
             lines.append(f"tyre lag          relaxation length {self.relaxation_m:.2f} m learnt from the μ–slip loops, "
                          "corrected before the fit")
@@ -141,6 +149,7 @@ def replay_frames(
         pipeline.input_codec.counter_jumps, pipeline.front_end.skipped_triggers,
         pipeline.front_end.measured_period_s, pipeline.front_end.period_mismatch(),
         dict(pipeline.front_end.gate.counts), pipeline.front_end.gate.suspect_share(), pipeline.relaxation.sigma_m,
+        dict(pipeline.wheel_join.dropped_by) if pipeline.wheel_join is not None else {},
     )
 
 

@@ -14,7 +14,7 @@ Plumbing on decoded values, between the codec and the front end: nothing here kn
 from __future__ import annotations
 
 import bisect
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Iterable, Mapping
 
 from .codec import DecodedInput, InputMessage
@@ -71,7 +71,13 @@ class WheelSpeedJoin:
                           for name, names in partners.items()}
         self._held: deque[DecodedInput] = deque()
         self._newest_s = float("-inf")
-        self.dropped = 0   # trigger frames dropped: a partner's wheel speeds around them missing
+        # Trigger frames dropped, by the partner message whose wheel speeds around them were missing.
+        self.dropped_by: Counter[str] = Counter()
+
+    @property
+    def dropped(self) -> int:
+        """Trigger frames dropped (no update): a partner's wheel speeds around them missing."""
+        return sum(self.dropped_by.values())
 
     @staticmethod
     def front_end_messages(messages: Iterable[InputMessage], trigger: str,
@@ -106,8 +112,9 @@ class WheelSpeedJoin:
             return [decoded]
         self._held.append(decoded)
         while len(self._held) > MAX_HELD:
+            waited_for = next((n for n, p in self._partners.items() if p.at(self._held[0].time_s) is None), "")
             self._held.popleft()
-            self.dropped += 1
+            self.dropped_by[waited_for] += 1
         return self._release()
 
     def _release(self) -> list[DecodedInput]:
@@ -118,7 +125,7 @@ class WheelSpeedJoin:
         while held:
             first = held[0]
             merged = dict(first.values)
-            for partner in self._partners.values():
+            for name, partner in self._partners.items():
                 speeds = partner.at(first.time_s)
                 if speeds is None and self._newest_s - first.time_s > GAP_PERIODS * partner.period_s:
                     speeds = False   # the partner's next frame is overdue: silent around this trigger
@@ -132,5 +139,5 @@ class WheelSpeedJoin:
                 out.append(DecodedInput(first.time_s, first.message, merged, True))
                 continue
             held.popleft()
-            self.dropped += 1
+            self.dropped_by[name] += 1
         return out

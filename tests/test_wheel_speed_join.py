@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import pytest
 import yaml
@@ -179,3 +180,24 @@ def test_check_config_names_where_the_rear_wheel_speeds_come_from(split_config):
 def test_a_multiplexed_partner_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="multiplexed"):
         Pipeline(load_config(REPO / "tests" / "corpus" / "configs" / "wheel_speeds_partner_multiplexed.yaml"))
+
+
+def test_the_replay_summary_and_the_daemon_status_name_the_silent_message(split_config, tmp_path):
+    from frictiond.busio import LogWriter
+    from frictiond.replay import replay_log
+
+    config = load_config(split_config)
+    frames, _ = simulate_frames(config, "dry", seed=2)
+    log = tmp_path / "rear_silent.log"
+    with LogWriter(log) as writer:
+        writer.write_all(f for f in frames if not (f.can_id == 177 and 2.0 <= f.time_s <= 2.5))
+    pipeline = Pipeline(config)
+    summary = replay_log(pipeline, log)
+    line = next(l for l in summary.format().splitlines() if l.startswith("unjoined"))
+    assert f"{pipeline.wheel_join.dropped} wheel-speed frames gave no update" in line
+    assert "WHEEL_SPEEDS_REAR silent around" in line and pipeline.wheel_join.dropped >= 45
+    from frictiond.daemon_status import DaemonStatus
+
+    status = SimpleNamespace(pipeline=pipeline, _fps=0.0, bus_down=False, bus=object(), bus_off=False,
+                             stats=SimpleNamespace(flood_dropped=0, tx_dropped=0))
+    assert "wheel-speed frames without WHEEL_SPEEDS_REAR" in DaemonStatus.status_text(status)

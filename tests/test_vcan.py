@@ -303,6 +303,27 @@ def test_can_fd_and_29_bit_inputs_live_equal_frictiond_replay(vcan, codec):
     print("fd:", report)
 
 
+def test_rear_wheel_speeds_apart_live_equal_frictiond_replay(vcan, codec):
+    """The rear wheel speeds in a message of their own, at their own phase: each update waits for
+    the rear message's next frame and is sent then. Live, the daemon sends what `frictiond replay`
+    of the capture sends, at the same frame times; the loop's INPUT_STALE ticks apart."""
+    out, s = scenario(vcan, "split")
+    assert s["rc"] == 0
+    capture = out / "split-capture.log"
+    frames = list(read_log(capture))
+    triggers = [f.time_s for f in frames if f.can_id == TRIGGER_ID]
+    rears = [f.time_s for f in frames if f.can_id == 0xB1]
+    assert triggers and abs(len(rears) - len(triggers)) <= 0.02 * len(triggers) and not set(rears) & set(triggers)
+    live = estimates(codec, read_log(out / "split-est.log"))
+    replayed = estimates(codec, frictiond_replay(out, capture, "split.yaml"))
+    ticks = [e for e in live if e[1] == "INPUT_STALE" and e not in replayed]
+    assert [e for e in live if e not in ticks] == replayed
+    assert len(replayed) >= len(triggers) - 3 and replayed[-1][1] == "VALID"
+    # (each update comes with the rear frame that completed it, not with its wheel-speed frame)
+    assert {t for t, _, _ in replayed} <= {round(t, 6) for t in rears}
+    print("split:", len(replayed), "updates,", len(ticks), "ticks; final", replayed[-1])
+
+
 def test_suite_stays_within_its_time_budget(vcan):
     _, results = vcan
     if "elapsed_s" in results:

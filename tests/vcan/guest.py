@@ -12,6 +12,7 @@ Scenarios, each with a fresh `frictiond run`:
   fd        fd.log (WHEEL_SPEEDS as 16-byte CAN FD frames, ACCELERATIONS on a 29-bit ID) with
             fd.yaml, as replay; needs vcan0's
             MTU at 72 (the guest sets it; a host's vcan0 without it: skipped)
+  split     split.log (the rear wheel speeds in WHEEL_SPEEDS_REAR, 0xB1) with split.yaml, as replay
 """
 from __future__ import annotations
 
@@ -204,11 +205,15 @@ def scenario_fd(out: Path) -> dict:
     return recorded_play(out, "fd", "fd.log", "fd.yaml")
 
 
+def scenario_split(out: Path) -> dict:
+    return recorded_play(out, "split", "split.log", "split.yaml")
+
+
 def main(out: Path) -> int:
     results: dict = {"kernel": os.uname().release, "scenarios": {}}
     t0 = time.monotonic()
     for name, fn in (("replay", scenario_replay), ("flood", scenario_flood), ("linkdown", scenario_linkdown),
-                     ("stale", scenario_stale), ("fd", scenario_fd)):
+                     ("stale", scenario_stale), ("fd", scenario_fd), ("split", scenario_split)):
         started = time.monotonic()
         try:
             results["scenarios"][name] = fn(out)

@@ -98,6 +98,29 @@ def _fd_config(out: Path, test_config: Path) -> Path:
     return path
 
 
+def _split_config(out: Path, test_config: Path) -> Path:
+    """The test config with the rear wheel speeds in a message of their own (WHEEL_SPEEDS_REAR,
+    0xB1, big-endian; split.dbc, split.yaml)."""
+    from frictiond.config import default_config_path
+
+    dbc = (default_config_path().parent / "frictiond.dbc").read_text()
+    rear = (' SG_ WheelSpeed_RL : 32|16@1+ (0.01,0) [0|655.35] "rad/s" FRICTIOND\n'
+            ' SG_ WheelSpeed_RR : 48|16@1+ (0.01,0) [0|655.35] "rad/s" FRICTIOND\n')
+    assert rear in dbc
+    dbc = dbc.replace(rear, '\nBO_ 177 WHEEL_SPEEDS_REAR: 4 VEHICLE\n'
+                            ' SG_ WheelSpeed_RL : 7|16@0+ (0.01,0) [0|655.35] "rad/s" FRICTIOND\n'
+                            ' SG_ WheelSpeed_RR : 23|16@0+ (0.01,0) [0|655.35] "rad/s" FRICTIOND\n')
+    dbc = dbc.replace('BA_ "GenMsgCycleTime" BO_ 176 10;', 'BA_ "GenMsgCycleTime" BO_ 176 10;\nBA_ "GenMsgCycleTime" BO_ 177 10;')
+    (out / "split.dbc").write_text(dbc)
+    data = yaml.safe_load(test_config.read_text())
+    data["can"]["dbc"] = str(out / "split.dbc")
+    for wheel in ("rl", "rr"):
+        data["signals"][f"wheel_speed_{wheel}"]["message"] = "WHEEL_SPEEDS_REAR"
+    path = out / "split.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
 def _braking_frames(config) -> tuple[list, str]:
     """The simulator's dry braking if it is there, else the synthetic drive; a few seconds."""
     try:
@@ -132,9 +155,10 @@ def prepare(out: Path) -> dict:
         w.write_all(f for f in frames if not (f.can_id == PRESSURE_ID and f.time_s - t0 > STALE_CUT_S))
     with LogWriter(out / "short.log") as w:
         w.write_all(f for f in frames if f.time_s - t0 <= 1.0)
-    fd_frames, _ = _braking_frames(load_config(_fd_config(out, cfg_path)))
-    with LogWriter(out / "fd.log") as w:
-        w.write_all(fd_frames)
+    for name, make in (("fd", _fd_config), ("split", _split_config)):
+        variant, _ = _braking_frames(load_config(make(out, cfg_path)))
+        with LogWriter(out / f"{name}.log") as w:
+            w.write_all(variant)
     info = {"source": source, "frames": len(frames), "seconds": frames[-1].time_s - t0, "config": str(cfg_path)}
     (out / "inputs.json").write_text(json.dumps(info))
     return info

@@ -145,6 +145,7 @@ class Daemon(DaemonBus, DaemonReload, DaemonStatus):
         self._reload_requested = False
         self.running = threading.Event()   # set once READY=1 was sent (tests wait on it)
         self._period_warned = False
+        self._cycles_told = False
         self.state_file: StateFile | None = None
         self.estimate_log: EstimateLog | None = None
         self._last_rx_time: float | None = None

@@ -35,6 +35,12 @@ class DaemonStatus:
         return ", ".join(parts)
 
     def _update_status(self, now: float) -> None:
+        measured = self.pipeline.measured_cycle_times
+        if measured and not self._cycles_told:
+            self._cycles_told = True
+            log.warning("the DBC gives no GenMsgCycleTime for %s: measured from the first frames and used "
+                        "(100 Hz was assumed until then); give it in the DBC",
+                        ", ".join(f"{k} ({1e3 * v:.0f} ms)" for k, v in sorted(measured.items())))
         fe = self.pipeline.front_end
         if not self._period_warned and fe.period_mismatch():
             self._period_warned = True

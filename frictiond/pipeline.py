@@ -11,8 +11,9 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from . import input_quality
-from .codec import DecodeFailure, InputCodec, OutputCodec, load_databases
+from .codec import DecodeFailure, InputCodec, InputMessage, OutputCodec, load_databases
 from .config import Config
+from .cycle_times import CycleTimeProbe
 from .frames import Frame
 from .frontend import PRESSURE_NAMES, FrontEnd, FrontEndResult, make_front_end
 from .relaxation import RelaxationCompensator
@@ -87,20 +88,16 @@ class Pipeline:
         self._input_ids = self.input_codec.input_ids
         self.output_codec = OutputCodec(output_db)
         messages = self.input_codec.input_messages()
-        trigger = next(m.name for m in messages if m.frame_id == self.input_codec.trigger_id)
-        partners = self.input_codec.wheel_partners
-        # Wheel speeds of messages apart from the trigger's, completed at its instants.
-        self.wheel_join: WheelSpeedJoin | None = None
-        if partners:
-            self.wheel_join = WheelSpeedJoin(trigger, partners, {m.name: m.period_s for m in messages})
-            messages = WheelSpeedJoin.front_end_messages(messages, trigger, partners)
-        # A car that sends only its master-cylinder pressure maps it to all four wheels.
-        pressure_sources = {(config.signals[n].message, config.signals[n].signal)
-                            for n in PRESSURE_NAMES if n in config.signals}
-        self.front_end: FrontEnd = make_front_end(config.vehicle, config.frontend, messages, trigger,
-                                                  pressures_are_master=len(pressure_sources) == 1)
-        self.trigger_message = trigger
-        self.estimator = estimator if estimator is not None else make_estimator(config, self.front_end.sample_period_s)
+        self.trigger_message = next(m.name for m in messages if m.frame_id == self.input_codec.trigger_id
+                                    and m.is_extended == self.input_codec.trigger_extended)
+        self._own_estimator = estimator is None
+        self.estimator = estimator
+        self._build(messages)
+        # Cycle times the DBC does not give: measured from the first frames (`cycle_times`), and
+        # the front end rebuilt with them where they are off the default assumed.
+        undeclared = {m.name: config.frontend.default_period for m in messages if not m.period_s}
+        self._cycle_probe = CycleTimeProbe(undeclared) if undeclared else None
+        self.measured_cycle_times: dict[str, float] = {}
         self.stats = PipelineStats()
         self.last_estimate: FrictionEstimate | None = None
         self.last_sample: PhysicalSample | None = None
@@ -116,6 +113,39 @@ class Pipeline:
         self._first_update_s: float | None = None
         self._corrupt_input = False   # the share of corrupted input keeps the status from VALID
         self.relaxation = RelaxationCompensator(config.frontend.relaxation_compensation)
+
+    def _build(self, messages: list[InputMessage]) -> None:
+        """The parts sized by the messages' cycle times: the wheel-speed join, the front end and
+        (unless given) the estimator."""
+        config, trigger = self.config, self.trigger_message
+        partners = self.input_codec.wheel_partners
+        # Wheel speeds of messages apart from the trigger's, completed at its instants.
+        self.wheel_join: WheelSpeedJoin | None = None
+        if partners:
+            self.wheel_join = WheelSpeedJoin(trigger, partners, {m.name: m.period_s for m in messages})
+            messages = WheelSpeedJoin.front_end_messages(messages, trigger, partners)
+        # A car that sends only its master-cylinder pressure maps it to all four wheels.
+        pressure_sources = {(config.signals[n].message, config.signals[n].signal)
+                            for n in PRESSURE_NAMES if n in config.signals}
+        self.front_end: FrontEnd = make_front_end(config.vehicle, config.frontend, messages, trigger,
+                                                  pressures_are_master=len(pressure_sources) == 1)
+        if self._own_estimator:
+            learnt = self.estimator.state() if self.estimator is not None else None
+            self.estimator = make_estimator(config, self.front_end.sample_period_s)
+            if learnt is not None:
+                self.estimator.load_state(learnt)
+
+    def _measure_cycle(self, message: str, time_s: float) -> None:
+        """A frame of a message without a DBC cycle time, while those are being measured; the
+        front end rebuilt once they are known, if any is off what was assumed."""
+        measured = self._cycle_probe.see(message, time_s)  # type: ignore[union-attr]
+        if measured is None:
+            return
+        self._cycle_probe = None
+        if measured:
+            self.measured_cycle_times = measured
+            self._build([m._replace(period_s=measured.get(m.name, m.period_s))
+                         for m in self.input_codec.input_messages()])
 
     # ------------------------------------------------------------------------------------------
     def process(self, frame: Frame) -> list[Frame]:
@@ -137,6 +167,8 @@ class Pipeline:
             self._ignore(frame)
             return []
         stats.input_frames += 1
+        if self._cycle_probe is not None:
+            self._measure_cycle(decoded.message, decoded.time_s)
         if self.wheel_join is None:
             result = self.front_end.push(decoded.time_s, decoded.message, decoded.values)
             if result is None:

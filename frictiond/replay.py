@@ -50,6 +50,8 @@ class ReplaySummary:
     # Wheel-speed frames that gave no update: a message carrying other wheels' speeds was silent
     # around them (`wheel_speed_join`), by that message.
     unjoined: dict = field(default_factory=dict)
+    # Cycle times the DBC does not give, measured from the first frames and used (`cycle_times`).
+    measured_cycles: dict = field(default_factory=dict)
 
     @property
     def update_period_s(self) -> float:
@@ -87,6 +89,10 @@ class ReplaySummary:
             lines.append(f"rejected input    {sum(self.rejected.values())}  (implausible frames, kept from the fit"
                          + "".join(f"; {k}: {v}" for k, v in sorted(self.rejected.items(), key=lambda kv: (-kv[1], kv[0])))
                          + ")")
+        if self.measured_cycles:
+            lines.append("cycle times       measured, the DBC gives none: " + ", ".join(
+                f"{k} {1e3 * v:.0f} ms" for k, v in sorted(self.measured_cycles.items()))
+                + " (100 Hz was assumed until then; give GenMsgCycleTime in the DBC)")
         if self.unjoined:
             lines.append(f"unjoined          {sum(self.unjoined.values())} wheel-speed frames gave no update: "
                          + "; ".join(f"{k or 'another wheel-speed message'} silent around {v} of them"
@@ -150,6 +156,7 @@ def replay_frames(
         pipeline.front_end.measured_period_s, pipeline.front_end.period_mismatch(),
         dict(pipeline.front_end.gate.counts), pipeline.front_end.gate.suspect_share(), pipeline.relaxation.sigma_m,
         dict(pipeline.wheel_join.dropped_by) if pipeline.wheel_join is not None else {},
+        dict(pipeline.measured_cycle_times),
     )
 
 

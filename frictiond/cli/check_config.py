@@ -83,7 +83,7 @@ def _do_check(args: argparse.Namespace) -> int:
 def _rate(period_s: float | None, pages: int) -> str:
     """Expected rate of a signal: its message's rate, divided among the multiplexer pages."""
     if not period_s:
-        return "? (no GenMsgCycleTime; assumes 100 Hz)"
+        return "? (no GenMsgCycleTime: measured from the first frames)"
     text = f"{1 / period_s:.0f} Hz"
     if pages > 1:
         text += f" ({1 / (period_s * pages):.0f} Hz per page)"

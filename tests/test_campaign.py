@@ -76,6 +76,7 @@ def test_draws_stay_in_their_documented_ranges():
     assert {s.jump_kind for s in specs if s.manoeuvre == "jump"} == {"dry-wet", "wet-dry", "to-ice"}
     assert any(s.sensors.master_only for s in specs) and not all(s.sensors.master_only for s in specs)
     assert 0.2 < sum(s.sensors.wheel_messages == "axles" for s in specs) / len(specs) < 0.4
+    assert 0.15 < sum(not s.sensors.cycle_times_in_dbc for s in specs) / len(specs) < 0.35
     assert any(s.relaxation_m > 0 for s in specs)
     slopes = [s.surfaces[0].speed_slope for s in specs]
     assert min(slopes) < -0.1 and max(slopes) > 0.1      # speed dependence of either sign
@@ -199,6 +200,23 @@ def test_a_car_may_send_its_rear_wheel_speeds_apart_and_nothing_else_changes():
     pipeline, estimates = estimates_of(two.config("lugre-tr"), two.frames)
     assert pipeline.wheel_join is not None and len(estimates) == len(front) - pipeline.wheel_join.dropped
     assert pipeline.wheel_join.dropped < 0.05 * len(front)
+
+
+def test_a_dbc_without_cycle_times_has_them_measured_and_the_frames_are_the_same():
+    from frictiond.replay import estimates_of
+
+    spec = draw_stop(7)
+    spec = dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, wheel_hz=50, accel_hz=50))
+    stops = {given: simulate_stop(dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors,
+                                                                                       cycle_times_in_dbc=given)))
+             for given in (True, False)}
+    assert "GenMsgCycleTime" in stops[True].dbc_path.read_text().split("BA_DEF_DEF_")[-1]
+    assert 'BA_ "GenMsgCycleTime"' not in stops[False].dbc_path.read_text()
+    assert [(f.time_s, f.can_id, f.data) for f in stops[True].frames] == \
+        [(f.time_s, f.can_id, f.data) for f in stops[False].frames]
+    pipeline, _ = estimates_of(stops[False].config("lugre-tr"), stops[False].frames)
+    assert pipeline.measured_cycle_times["WHEEL_SPEEDS"] == 0.02 and pipeline.front_end.sample_period_s == 0.02
+    assert pipeline.measured_cycle_times["ACCELERATIONS"] == 0.02
 
 
 def test_master_cylinder_only_cars_send_no_wheel_pressures():

@@ -37,9 +37,9 @@ def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=Non
 def campaign_stop_estimates(seed, relaxation_compensation=True, family=None, **lugre_options):
     """One stop of the randomised campaign (its car, DBC and config; `family` as `draw_stop`'s;
     `lugre_options` replacing `LugreTROptions` fields) through the replay pipeline: (the simulated
-    stop, lugre-tr's estimates). In still air and with the four wheel speeds in one message, as
-    the stops these tests tell of were found (the campaign's wind and split wheel messages came
-    later)."""
+    stop, lugre-tr's estimates). In still air, with the four wheel speeds in one message and the
+    cycle times in the DBC, as the stops these tests tell of were found (the campaign's wind,
+    split wheel messages and DBCs without cycle times came later)."""
     from dataclasses import replace
 
     from frictiond.campaign.draw import draw_stop
@@ -47,7 +47,8 @@ def campaign_stop_estimates(seed, relaxation_compensation=True, family=None, **l
     from frictiond.replay import estimates_of
 
     spec = draw_stop(seed, family)
-    stop = simulate_stop(replace(spec, wind_mps=0.0, sensors=replace(spec.sensors, wheel_messages="one")))
+    stop = simulate_stop(replace(spec, wind_mps=0.0, sensors=replace(spec.sensors, wheel_messages="one",
+                                                                     cycle_times_in_dbc=True)))
     config = stop.config("lugre-tr")
     config = replace(config, frontend=replace(config.frontend, relaxation_compensation=relaxation_compensation),
                      estimator=replace(config.estimator, lugre_tr=replace(config.estimator.lugre_tr, **lugre_options)))

@@ -61,6 +61,7 @@ Sensors (see sensors.py)
 - 15 % have a ground-speed sensor; ABS flags: none 40 %, global 30 %, per wheel 30 %
 - 30 % send the rear wheel speeds in a message of their own (big-endian, at the same rate with
   their own phase, jitter and losses), drawn last: the other draws are those of before
+- 25 % have a DBC without cycle times (no GenMsgCycleTime), drawn after that
 """
 from __future__ import annotations
 
@@ -245,6 +246,7 @@ def _draw_sensors(rng: np.random.Generator) -> SensorSpec:
         master_only=bool(rng.random() < 0.20), reference_speed=bool(rng.random() < 0.15),
         abs_flags=("none", "global", "wheel")[int(rng.choice(3, p=[0.4, 0.3, 0.3]))],
         wheel_messages="axles" if rng.random() < 0.3 else "one",
+        cycle_times_in_dbc=bool(rng.random() >= 0.25),
     )
 
 

@@ -177,6 +177,7 @@ _FAMILY_GROUPS: dict[str, Callable[[Row], str]] = {
     "pressures": lambda r: "master-only" if r.get("master_only") else "per-wheel",
     "wheel_hz": lambda r: str(r.get("wheel_hz")),
     "wheel_messages": lambda r: str(r.get("wheel_messages", "one")),
+    "cycle_times": lambda r: "in DBC" if r.get("cycle_times_in_dbc", True) else "measured",
 }
 
 

@@ -116,7 +116,7 @@ def spec_fields(spec: StopSpec) -> dict[str, Any]:
         "drop_rate": round(sensors.drop_rate, 4), "accel_offset": round(sensors.accel_offset_mps2, 3),
         "master_only": sensors.master_only, "reference_speed": sensors.reference_speed,
         "abs_flags": sensors.abs_flags, "wind_mps": round(spec.wind_mps, 2),
-        "wheel_messages": sensors.wheel_messages,
+        "wheel_messages": sensors.wheel_messages, "cycle_times_in_dbc": sensors.cycle_times_in_dbc,
     }
 
 

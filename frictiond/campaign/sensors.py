@@ -46,6 +46,9 @@ class SensorSpec:
     # "one": the four wheel speeds in one message; "axles": the rear ones in a message of their own
     # (big-endian, own phase, jitter and losses), as cars that send front and rear apart do
     wheel_messages: str = "one"
+    # whether the DBC gives its messages' cycle times (GenMsgCycleTime); without, frictiond
+    # measures them from the first frames
+    cycle_times_in_dbc: bool = True
 
 
 class BusEvent(NamedTuple):
@@ -97,7 +100,8 @@ def bus_dbc_text(spec: SensorSpec) -> str:
     for frame_id, name, _hz, sigs in msgs:
         lines += [f"BO_ {frame_id} {name}: 8 VEHICLE", *sigs, ""]
     lines += ['BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;', 'BA_DEF_DEF_ "GenMsgCycleTime" 0;']
-    lines += [f'BA_ "GenMsgCycleTime" BO_ {frame_id} {_cycle_ms(hz)};' for frame_id, _n, hz, _s in msgs]
+    if spec.cycle_times_in_dbc:
+        lines += [f'BA_ "GenMsgCycleTime" BO_ {frame_id} {_cycle_ms(hz)};' for frame_id, _n, hz, _s in msgs]
     return "\n".join(lines) + "\n"
 
 

@@ -14,10 +14,12 @@ Plumbing on decoded values, between the codec and the front end: nothing here kn
 from __future__ import annotations
 
 import bisect
+import math
 from collections import Counter, deque
 from collections.abc import Iterable, Mapping
 
 from .codec import DecodedInput, InputMessage
+from .message_clock import CLOCK_STEP_S
 
 # A partner's frames may be this many of its periods apart and still be interpolated between
 # (one lost frame), and a trigger waits this long past its instant for the partner's next one.
@@ -50,8 +52,8 @@ class _Partner:
         when they cannot be known (no frame before it, or too long a silence around it)."""
         times = self.times
         k = bisect.bisect_left(times, time_s)
-        if k == len(times):
-            return None
+        if k == len(times) or times[k] - time_s > CLOCK_STEP_S:
+            return None           # (no frame after it yet, but one stamped far ahead: not the bus's time)
         if times[k] == time_s:
             return self.values[k]
         if k == 0 or times[k] - times[k - 1] > GAP_PERIODS * self.period_s:
@@ -70,7 +72,10 @@ class WheelSpeedJoin:
         self._partners = {name: _Partner(tuple(names), periods.get(name) or DEFAULT_PERIOD_S)
                           for name, names in partners.items()}
         self._held: deque[DecodedInput] = deque()
-        self._newest_s = float("-inf")
+        # The time of the frame just pushed (what "now" is for a trigger still waiting), and of
+        # the newest trigger (the clock partner frames are taken against).
+        self._now_s = float("-inf")
+        self._trigger_s = float("-inf")
         # Trigger frames dropped, by the partner message whose wheel speeds around them were missing.
         self.dropped_by: Counter[str] = Counter()
 
@@ -98,18 +103,32 @@ class WheelSpeedJoin:
         return out
 
     def push(self, decoded: DecodedInput) -> list[DecodedInput]:
-        """The decoded inputs to give the front end, in order, now that `decoded` has come."""
-        self._newest_s = max(self._newest_s, decoded.time_s)
+        """The decoded inputs to give the front end, in order, now that `decoded` has come.
+
+        A frame whose time no clock reads (not finite) goes on as it is, for the front end's gate
+        to refuse; one far from the trigger's clock (a stepped or corrupt time) adds no speeds and
+        waits for nothing: one bad time must not hold every update behind it."""
+        t = decoded.time_s
         partner = self._partners.get(decoded.message)
+        if not math.isfinite(t):
+            return [decoded] if partner is None else []
+        self._now_s = t
         if partner is not None:
-            partner.add(decoded.time_s, decoded.values)
+            if abs(t - self._trigger_s) <= CLOCK_STEP_S or self._trigger_s == float("-inf"):
+                partner.add(t, decoded.values)
             out = self._release()
             rest = {k: v for k, v in decoded.values.items() if k not in partner.names}
             if rest:
-                out.append(DecodedInput(decoded.time_s, decoded.message, rest, False))
+                out.append(DecodedInput(t, decoded.message, rest, False))
             return out
         if decoded.message != self.trigger:
             return [decoded]
+        self._trigger_s = t
+        late = [n for n, p in self._partners.items() if p.times and t - p.times[-1] > CLOCK_STEP_S]
+        if late:
+            # (its partners' newest frames are far behind it: silent, or this time is not the bus's)
+            self.dropped_by[late[0]] += 1
+            return self._release()
         self._held.append(decoded)
         while len(self._held) > MAX_HELD:
             waited_for = next((n for n, p in self._partners.items() if p.at(self._held[0].time_s) is None), "")
@@ -127,7 +146,7 @@ class WheelSpeedJoin:
             merged = dict(first.values)
             for name, partner in self._partners.items():
                 speeds = partner.at(first.time_s)
-                if speeds is None and self._newest_s - first.time_s > GAP_PERIODS * partner.period_s:
+                if speeds is None and self._now_s - first.time_s > GAP_PERIODS * partner.period_s:
                     speeds = False   # the partner's next frame is overdue: silent around this trigger
                 if speeds is None:
                     return out       # (wait for it)

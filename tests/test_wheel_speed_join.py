@@ -201,3 +201,22 @@ def test_the_replay_summary_and_the_daemon_status_name_the_silent_message(split_
     status = SimpleNamespace(pipeline=pipeline, _fps=0.0, bus_down=False, bus=object(), bus_off=False,
                              stats=SimpleNamespace(flood_dropped=0, tx_dropped=0))
     assert "wheel-speed frames without WHEEL_SPEEDS_REAR" in DaemonStatus.status_text(status)
+
+
+def test_a_corrupt_time_on_one_frame_holds_no_update_behind_it(split_config):
+    """One frame stamped far in the future (any message, the rear one too), one stamped NaN: the
+    join must not wait for the rear's frame 'after' the bogus one, nor take 'now' from it."""
+    config = load_config(split_config)
+    frames, _ = simulate_frames(config, "dry", seed=2)
+    rears = [i for i, f in enumerate(frames) if f.can_id == 177]
+    accels = [i for i, f in enumerate(frames) if f.can_id == 0xC0]
+    corrupt = list(frames)
+    for t, index in zip((1e12, float("nan"), 1e12, -1.0), (rears[50], rears[51], accels[300], rears[400])):
+        corrupt[index] = corrupt[index]._replace(time_s=t)
+    counts = {}
+    for name, stream in (("clean", frames), ("corrupt", corrupt)):
+        pipeline = Pipeline(config)
+        for f in stream:
+            pipeline.process(f)
+        counts[name] = pipeline.stats.updates
+    assert counts["corrupt"] >= counts["clean"] - 10, counts

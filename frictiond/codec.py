@@ -18,7 +18,7 @@ from cantools.database import Database
 
 from .config import ConfigError, SignalSource
 from .e2e import E2EChecker, protect
-from .frames import EXTENDED_KEY, Frame, frame_key
+from .frames import Frame, frame_key
 from .input_names import OPTIONAL_INPUTS, REQUIRED_INPUTS
 from .samples import WHEELS, FrictionEstimate, PhysicalSample, Status
 
@@ -144,7 +144,6 @@ class InputMessage(NamedTuple):
     length: int
     is_multiplexed: bool
     is_extended: bool = False    # a 29-bit ID
-
 
 
 class DecodedInput(NamedTuple):
@@ -365,22 +364,23 @@ class InputCodec:
         for r in self.resolved:
             if r.name.startswith("wheel_speed"):
                 wheel_messages.setdefault(r.message, []).append(r.name)
+        if not wheel_messages:
+            raise ConfigError("signals: no wheel speed mapped (the message of wheel_speed_fl triggers each update)")
         self.trigger_message = next((r.message for r in self.resolved if r.name == "wheel_speed_fl"),
-                                    next(iter(wheel_messages), ""))
+                                    next(iter(wheel_messages)))
         self.wheel_partners: dict[str, tuple[str, ...]] = {
             m: tuple(names) for m, names in wheel_messages.items() if m != self.trigger_message}
         self._plans: dict[int, _MessagePlan] = {}
         for name, sigs in by_message.items():
-            message = db.get_message_by_name(name)
-            key = frame_key(message.frame_id, bool(message.is_extended_frame))
-            if key in self._plans:
-                raise ConfigError(f"signals: two mapped messages share frame ID 0x{message.frame_id:X}: "
-                                  f"{self._plans[key].name!r} and {name!r}")
-            if name in self.wheel_partners and message.is_multiplexed():
+            plan = _MessagePlan(db.get_message_by_name(name), sigs, name == self.trigger_message)
+            if plan.key in self._plans:
+                raise ConfigError(f"signals: two mapped messages share frame ID 0x{plan.frame_id:X}: "
+                                  f"{self._plans[plan.key].name!r} and {name!r}")
+            if name in self.wheel_partners and plan.message.is_multiplexed():
                 raise ConfigError(
                     f"signals: wheel speeds from message {name!r}, which is multiplexed: wheel speeds that come "
                     f"apart from {self.trigger_message!r} (the message of wheel_speed_fl) must be whole in every frame")
-            self._plans[key] = _MessagePlan(message, sigs, name == self.trigger_message)
+            self._plans[plan.key] = plan
         # The inputs' IDs as numbers (a first cheap test of a frame), and those sent as 29-bit IDs.
         self.input_ids: frozenset[int] = frozenset(p.frame_id for p in self._plans.values())
         self.extended_input_ids: frozenset[int] = frozenset(p.frame_id for p in self._plans.values() if p.is_extended)
@@ -429,7 +429,7 @@ class InputCodec:
         Raises `DecodeFailure` for input frames that cannot be trusted (wrong length, a mapped
         signal outside its DBC range or not finite).
         """
-        plan = self._plans.get(frame.can_id | EXTENDED_KEY if frame.is_extended else frame.can_id)
+        plan = self._plans.get(frame_key(frame.can_id, frame.is_extended))
         if plan is None:
             return None
         data = frame.data

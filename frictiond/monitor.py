@@ -23,7 +23,7 @@ from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator, Sequence
 
-from .frames import EXTENDED_KEY, Frame, frame_key
+from .frames import Frame, frame_key
 from .samples import WHEELS, Status
 
 RATE_WINDOW_S = 1.0
@@ -237,7 +237,7 @@ class MonitorModel:
         if not frame.is_extended and cid in self.outputs:
             self.outputs[cid].seen(frame.time_s)
             return self._feed_output(frame)
-        tracker = self.inputs.get(cid | EXTENDED_KEY if frame.is_extended else cid)
+        tracker = self.inputs.get(frame_key(cid, frame.is_extended))
         if tracker is None:
             self.other_frames += 1
             return None

@@ -88,8 +88,7 @@ class Pipeline:
         self._input_ids = self.input_codec.input_ids
         self.output_codec = OutputCodec(output_db)
         messages = self.input_codec.input_messages()
-        self.trigger_message = next(m.name for m in messages if m.frame_id == self.input_codec.trigger_id
-                                    and m.is_extended == self.input_codec.trigger_extended)
+        self.trigger_message = self.input_codec.trigger_message
         self._own_estimator = estimator is None
         self.estimator = estimator
         self._build(messages)

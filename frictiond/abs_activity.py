@@ -24,6 +24,12 @@ Two sources, the pressures read two ways; any one marks a wheel:
   controller at the top of its pressure, a slip controller) modulates by 10–20 % and never
   lets go by a quarter.
 
+A drop of 5 bar is 8 σ of a sensor with 0.6 bar of noise. A noisier sensor (`pressure_noise`
+measures it from the frames) would read its noise as releases, and a stop without ABS as one at
+the grip limit: its threshold rises to 8 σ. Quieter sensors do not lower it: releases of a
+few bar (an ABS on ice) counted, and slip controllers holding a late-peaking tyre well below
+its peak then passed for the limit (benchmarks/README.md, session 66).
+
 A mark lasts `memory_s` (about the estimator's excitation window): the release comes after the
 peak, the evidence is for the samples just before it.
 
@@ -36,12 +42,14 @@ from collections import deque
 from dataclasses import dataclass
 
 NO_ACTIVITY = (False, False, False, False)
+MIN_RELEASE_DROP_BAR = 5.0   # the drop a release needs from a sensor no noisier than 0.6 bar
 
 
 @dataclass(frozen=True, slots=True)
 class AbsActivityOptions:
     window_s: float = 0.3            # a wheel's pressure is compared with its own maximum over this
-    min_drop_bar: float = 5.0        # a release: at least this far below that maximum ...
+    min_drop_bar: float = MIN_RELEASE_DROP_BAR   # a release: at least this far below that maximum ...
+    noise_drop_ratio: float = 8.0    # ... or this many σ of the sensors' noise, if more, ...
     min_drop_ratio: float = 0.25     # ... and this share of it
     min_relative_drop: float = 0.10  # or this share more than the demand (other wheels) fell
     min_pressure_bar: float = 10.0   # only where the wheel was braked this hard
@@ -59,6 +67,24 @@ class AbsActivity:
         self._maxima: tuple[deque[tuple[float, float]], ...] = tuple(deque() for _ in range(5))
         self._last_time_s = -math.inf
         self._last_active_s = [-math.inf] * 4
+        self._min_drop_bar = self.options.min_drop_bar
+
+    def set_noise(self, sigma_bar: float | None) -> None:
+        """The pressure sensors' noise σ (None: not known; `pressure_noise`). A release is a
+        drop the noise cannot make: over a window the highest reading is about 2 σ above the
+        pressure and the present one may be 2–3 σ below it, so a drop counts from
+        `noise_drop_ratio` σ where that is more than `min_drop_bar`. Never less: the fixed
+        threshold is what the estimator's trust in a release was measured at."""
+        o = self.options
+        drop = o.min_drop_bar
+        if sigma_bar is not None and math.isfinite(sigma_bar):
+            drop = max(o.min_drop_bar, o.noise_drop_ratio * sigma_bar)
+        self._min_drop_bar = drop
+
+    @property
+    def min_drop_bar(self) -> float:
+        """The drop that counts as a release now: `min_drop_bar`, or more for a noisy sensor."""
+        return self._min_drop_bar
 
     def reset(self) -> None:
         for q in self._maxima:
@@ -97,7 +123,7 @@ class AbsActivity:
             return NO_ACTIVITY      # the driver is letting go: every pressure falls, none is a release
         fallen = [(m - p) / m if m > 0.0 else 0.0 for m, p in zip(maxima, now)]
         demand_fallen = (demand_max - demand) / demand_max if demand_max > 0.0 else 0.0
-        min_pressure, min_drop, min_ratio, min_relative = (o.min_pressure_bar, o.min_drop_bar, o.min_drop_ratio,
+        min_pressure, min_drop, min_ratio, min_relative = (o.min_pressure_bar, self._min_drop_bar, o.min_drop_ratio,
                                                            o.min_relative_drop)
         out = []
         for i in range(4):

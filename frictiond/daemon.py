@@ -146,6 +146,7 @@ class Daemon(DaemonBus, DaemonReload, DaemonStatus):
         self.running = threading.Event()   # set once READY=1 was sent (tests wait on it)
         self._period_warned = False
         self._cycles_told = False
+        self._noise_told = False
         self.state_file: StateFile | None = None
         self.estimate_log: EstimateLog | None = None
         self._last_rx_time: float | None = None

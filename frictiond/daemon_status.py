@@ -1,9 +1,12 @@
 """The daemon's status reporting (`DaemonStatus`, a part of `daemon.Daemon`; its state is the
 daemon's): the one-line status systemd shows (sd_notify STATUS=), its frames/s, a log line when
-the estimate's status changes, and the warning for a trigger message off its DBC cycle time."""
+the estimate's status changes, and the warnings for a trigger message off its DBC cycle time, for
+cycle times measured and for brake-pressure sensors too noisy for the usual ABS-release threshold."""
 from __future__ import annotations
 
 import logging
+
+from .abs_activity import MIN_RELEASE_DROP_BAR
 
 log = logging.getLogger("frictiond.daemon")
 
@@ -48,6 +51,11 @@ class DaemonStatus:
                         "and the staleness limits are sized from the DBC; fix its GenMsgCycleTime",
                         fe.trigger_message, 1e3 * (fe.measured_period_s or 0.0),
                         1e3 * fe.declared_period_s)
+        if not self._noise_told and fe.release_drop_bar > MIN_RELEASE_DROP_BAR:
+            self._noise_told = True
+            log.warning("the brake-pressure sensors are noisy (σ %.2f bar measured): a wheel's pressure counts "
+                        "as released by the ABS only from a %.1f bar drop (%g bar for quieter sensors)",
+                        fe.pressure_noise_bar or 0.0, fe.release_drop_bar, MIN_RELEASE_DROP_BAR)
         dt = now - self._status_at
         if dt > 0:
             self._fps = (self.stats.rx_frames - self._status_rx) / dt

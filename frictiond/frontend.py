@@ -45,6 +45,7 @@ from .input_alignment import InputAlignment, MessageHistory, new_series
 from .input_names import (ABS_FLAG_NAMES, DRIVE_TORQUE_NAMES, MASTER_PRESSURE_NAME, PRESSURE_NAMES, REQUIRED_INPUTS,
                           WHEEL_SPEED_NAMES)
 from .plausibility import InputGate
+from .pressure_noise import PressureNoise
 from .pressure_zeros import PressureZeros
 from .sample_physics import PHYSICS_TYPES as _PHYSICS_TYPES  # noqa: F401 (tests hand it to the compiled physics)
 from .sample_physics import SamplePhysics
@@ -200,6 +201,7 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
         self._has_drive_torque = all(n in self._signal_message for n in DRIVE_TORQUE_NAMES)
         self._has_yaw_rate = "yaw_rate" in self._signal_message
         self._abs_activity = AbsActivity()
+        self._pressure_noise = PressureNoise(PRESSURE_NAMES)
         # The signals each sample reads at the window's centre, fetched in one call
         # (`_values_at`): accelerations, pressures, then the optional drive torques and yaw rate.
         self._sample_inputs = (("accel_long", "accel_lat") + PRESSURE_NAMES
@@ -224,6 +226,8 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
         # Frame-level plausibility (issue 22): a corrupted frame never reaches the histories.
         self.gate = InputGate(self.vehicle, {m: h.period_s for m, h in self._history.items()})
         self._abs_activity.reset()
+        self._pressure_noise.reset()
+        self._abs_activity.set_noise(None)
         self._before_sample: tuple | None = None
         self._wheel_times: deque[float] = deque(maxlen=n)
         self._wheel_speeds: deque[tuple[float, float, float, float]] = deque(maxlen=n)
@@ -289,6 +293,8 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
                 self._wheel_times.clear()
                 self._wheel_speeds.clear()
         if message in self._pressure_messages:
+            if self._pressure_noise.push(time_s, values):
+                self._abs_activity.set_noise(self._pressure_noise.sigma())
             values = self._zeroed_pressures(values)
         core = self.core
         if core is not None and type(time_s) is float and type(values) is dict and time_s >= history.last_arrival_s:
@@ -353,6 +359,16 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
             result.sample.accel_offset_doubt_mps2 = self.accel_offset_doubt_mps2
             result.sample.input_suspect_share = self.gate.suspect_share()
         return result
+
+    @property
+    def pressure_noise_bar(self) -> float | None:
+        """The brake-pressure sensors' noise σ as measured (`pressure_noise`), None until known."""
+        return self._pressure_noise.sigma()
+
+    @property
+    def release_drop_bar(self) -> float:
+        """How far a wheel's pressure must fall to count as an ABS release (`abs_activity`)."""
+        return self._abs_activity.min_drop_bar
 
     def _mark_abs_activity(self, sample: PhysicalSample) -> None:
         """`sample.abs_active`: the wheels an ABS is working (see `abs_activity`), from the

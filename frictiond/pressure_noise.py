@@ -16,8 +16,10 @@ than it would, never less. A pressure that ramps at the pedal's speed leaves its
 in the residuals too: that reads as more noise, never less.
 
 What is not used: a reading at or below 0 (a sensor reads no pressure below 0: its noise is cut
-there) and a reading equal to the one before (a sender that repeats its last value, or a
-quantisation step not crossed, would read as no noise at all).
+there) and a reading equal to the one before (a sender that repeats its last value would read as
+half the noise). A third equal reading in a row is a pressure held by a sensor quieter than its
+resolution, and counts as a residual of 0: without it an ABS's holds, read by a noiseless
+sensor, would leave only its valves' steps to measure.
 
 Pure numbers: nothing here knows of CAN.
 """
@@ -34,11 +36,12 @@ GAUSSIAN_MEDIAN_ABS = 0.6745
 
 
 class _SensorNoise:
-    __slots__ = ("times", "values", "block", "blocks", "sigma")
+    __slots__ = ("times", "values", "repeats", "block", "blocks", "sigma")
 
     def __init__(self) -> None:
         self.times: deque[float] = deque(maxlen=2)
         self.values: deque[float] = deque(maxlen=2)
+        self.repeats = 0            # readings equal to the last one taken, in a row
         self.block: list[float] = []
         self.blocks: deque[float] = deque(maxlen=NOISE_BLOCKS)
         self.sigma: float | None = None
@@ -50,27 +53,38 @@ class _SensorNoise:
             self.values.clear()
             return False
         if self.values and value == self.values[-1]:
-            return False
+            # (a repeat may be a sender's; a third equal reading in a row is a pressure held
+            # by a sensor quieter than its resolution, and the line to the next reading starts
+            # where the hold ends)
+            self.repeats += 1
+            self.times[-1] = time_s
+            return self._add(0.0) if self.repeats >= 2 else False
+        self.repeats = 0
         changed = False
         if len(self.times) == 2:
             (t0, t1), (x0, x1) = self.times, self.values
             span = time_s - t0
             a, b = (time_s - t1) / span, (t1 - t0) / span
             # x1 less the line through its neighbours; its noise is σ·√(1 + a² + b²)
-            self.block.append(abs(x1 - a * x0 - b * value) / math.sqrt(1.0 + a * a + b * b))
-            n = len(self.block)
-            if n == NOISE_BLOCK:
-                self.block.sort()
-                self.blocks.append(self.block[n // 2] / GAUSSIAN_MEDIAN_ABS)
-                self.block = []
-                self.sigma = sorted(self.blocks)[min(1, len(self.blocks) - 1)]
-                changed = True
-            elif not self.blocks and n >= NOISE_FIRST and n % 16 == 0:
-                self.sigma = sorted(self.block)[n // 2] / GAUSSIAN_MEDIAN_ABS
-                changed = True
+            changed = self._add(abs(x1 - a * x0 - b * value) / math.sqrt(1.0 + a * a + b * b))
         self.times.append(time_s)
         self.values.append(value)
         return changed
+
+    def _add(self, residual: float) -> bool:
+        """One residual into the current block; True when the stated noise changed."""
+        self.block.append(residual)
+        n = len(self.block)
+        if n == NOISE_BLOCK:
+            self.block.sort()
+            self.blocks.append(self.block[n // 2] / GAUSSIAN_MEDIAN_ABS)
+            self.block = []
+            self.sigma = sorted(self.blocks)[min(1, len(self.blocks) - 1)]
+            return True
+        if not self.blocks and n >= NOISE_FIRST and n % 16 == 0:
+            self.sigma = sorted(self.block)[n // 2] / GAUSSIAN_MEDIAN_ABS
+            return True
+        return False
 
 
 class PressureNoise:

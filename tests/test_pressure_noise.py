@@ -60,6 +60,16 @@ def test_abs_cycles_read_as_a_little_more_noise_and_never_less():
     assert _measured(_frames(steps, 0.15, 4.0, hz=100.0)) > 0.15 * 0.8
 
 
+def test_a_noiseless_sensor_under_an_abs_that_holds_reads_as_quiet():
+    # A deceleration ABS read by a sensor without noise at 50 Hz: dumped by 12 bar in one frame,
+    # held for three frames, re-applied along a ramp for three. The holds are the sensor's
+    # proof of quiet; without them only the corners' residuals would be left to measure.
+    cycle = [50.0, 50.0, 50.0, 54.0, 58.0, 62.0]
+    readings = [(k * 0.02, (cycle[k % 6],) * 4) for k in range(400)]
+    measured = _measured(readings)
+    assert measured is not None and measured < 0.6      # (8 σ below the fixed 5 bar)
+
+
 def test_readings_cut_at_zero_say_nothing_and_too_few_say_nothing():
     # Free rolling with a sensor reading 0.4 bar low: its noise is cut at 0 nearly always.
     assert _measured(_frames(lambda t: 0.0, 0.2, 3.0, seed=5)) is None

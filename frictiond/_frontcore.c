@@ -493,6 +493,7 @@ enum {
 #define LOCKED_WHEEL_RATIO 0.05
 #define BODY_ACCEL_TOLERANCE 0.05
 #define PRESSURE_TOLERANCE 0.25
+#define FAULT_WIND 5.0           /* body_equation.FAULT_WIND_MPS */
 #define UNLEARNT_ACCEL_TOLERANCE 0.3
 #define ACCEL_BIAS_LEARNT_SAMPLES 50
 #define ACCEL_BIAS_PRIOR_SAMPLES 2.0
@@ -946,8 +947,9 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
                                    + (s->bias_samples < ACCEL_BIAS_LEARNT_SAMPLES ? UNLEARNT_ACCEL_TOLERANCE : 0.0);
     const double tolerance = k[K_MASS] * k[K_RADIUS] * accel_tolerance + PRESSURE_TOLERANCE * gains;
     const int resolved = unexplained_torque(s, 1.0, 1.0) > tolerance;
+    const double wind = k[K_DRAG] * FAULT_WIND * (2.0 * speed + FAULT_WIND) * k[K_RADIUS];
     const int beyond_gains = unexplained_torque(s, (1.0 - lim) / BRAKE_MODEL_MARGIN,
-                                                (1.0 + lim) * BRAKE_MODEL_MARGIN) > tolerance;
+                                                (1.0 + lim) * BRAKE_MODEL_MARGIN) > tolerance + wind;
     const int released = (k[K_MASTER_ONLY] != 0.0
                           && ((window_ratio < 1.0 - lim && resolved)
                               || (ratio < 1.0 - lim && total_brake - needed > tolerance)))

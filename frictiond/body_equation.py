@@ -29,6 +29,11 @@ PRESSURE_TOLERANCE_BAR = 0.25
 # offset a sensor may have (a fault seen right after start-up would be the accelerometer's).
 UNLEARNT_ACCEL_TOLERANCE_MPS2 = 0.3
 ACCEL_BIAS_LEARNT_SAMPLES = 50
+# A wind along the road the config cannot know (m/s, a gentle breeze): the drag it adds or takes
+# away is weather, not a broken pressure signal, and the fault verdict allows for it (at 25 m/s a
+# 5 m/s head wind is 110 N more drag, a fifth of the tyres' force on μ 0.034 ice; wind_doubt, 0
+# by default, is what the gain's doubt allows for). (Also in _frontcore.c.)
+FAULT_WIND_MPS = 5.0
 # How far the offset learnt so far may be off (`offset_doubt_mps2`): its samples' standard error,
 # their spread taken with a prior of this many samples spread by the tolerance above (two or three
 # samples that happen to agree do not make an offset known). (Also in _frontcore.c.)
@@ -192,16 +197,17 @@ class BodyEquation:
         ratio = needed / total_brake
         if not math.isfinite(ratio):
             return      # a NaN here would stay in the sums for good
-        if not self._judge_brake_model(total_brake, brake_rate, needed, ratio):
+        if not self._judge_brake_model(total_brake, brake_rate, needed, ratio, speed):
             if opts.pressure_lag_compensation:
                 self._learn_pressure_lag(raw_brake, raw_rate, needed)
             self._learn_brake_gain(total_brake, ratio)
 
-    def _judge_brake_model(self, total_brake: float, brake_rate: float, needed: float, ratio: float) -> bool:
+    def _judge_brake_model(self, total_brake: float, brake_rate: float, needed: float, ratio: float,
+                           speed: float) -> bool:
         """Whether the pressures still say what the brakes do (`_brake_model_holds`), and whether an
         ABS has released wheels behind a master-cylinder pressure in this stop: returned, as then
         neither the gain nor the lag is learnt from the sample. `needed` is the brakes' torque the
-        body needs, `ratio` it over `total_brake`, the torque the pressures give."""
+        body needs, `ratio` it over `total_brake`, the torque the pressures give, at `speed`."""
         veh = self.vehicle
         lim = self.options.brake_gain_limits
         # The pressures against the body over the last ~0.2 s of braking (sums of torques, so that
@@ -224,9 +230,10 @@ class BodyEquation:
         tolerance = veh.mass * veh.wheel_radius * accel_tolerance + PRESSURE_TOLERANCE_BAR * sum(self._brake_gains)
         resolved = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
                                        self._recent_weight_nm, 1.0, 1.0) > tolerance
+        wind = veh.drag_area_coefficient * FAULT_WIND_MPS * (2.0 * speed + FAULT_WIND_MPS) * veh.wheel_radius
         beyond_gains = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
                                            self._recent_weight_nm, (1.0 - lim) / _BRAKE_MODEL_MARGIN,
-                                           (1.0 + lim) * _BRAKE_MODEL_MARGIN) > tolerance
+                                           (1.0 + lim) * _BRAKE_MODEL_MARGIN) > tolerance + wind
         # With one master pressure for all wheels, brakes giving less than it says beyond what the
         # gain correction explains are an ABS releasing wheels, not a wrong signal: no gain is
         # learnt then, and no wheel's brake torque is known (`_brake_released`). Judged on this

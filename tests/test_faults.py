@@ -302,14 +302,33 @@ def test_brake_pressures_off_by_a_factor_are_a_fault_not_an_estimate(default_con
     # The brake-gain check cannot absorb a factor of 2: the body equation disagrees with the
     # pressures for most of the braking, which must show as FAULT, never as a VALID μ. Except
     # halved pressures on ice: at 0.4 m/s² the brakes give ~160 N·m, and the gain limits with
-    # the accelerometer's and the pressures' offsets explain up to about a factor of 2 there, so
-    # the fault shows only while the ABS's cycles carry the disagreement further out.
+    # the accelerometer's and the pressures' offsets and a 5 m/s wind's drag explain up to about
+    # a factor of 2 there. The disagreement is seen only while the ABS's cycles carry it further
+    # out, too briefly for a FAULT, and the estimate stays short of VALID.
     frames, sim = simulate_frames(default_config, scenario, seed=2)
     pipeline = Pipeline(default_config)
     _, estimates, bad = faults.replay_on_bus(default_config, faults.pressure_scaled(frames, pipeline.input_codec, factor),
                                              pipeline=pipeline)
     assert not bad
     assert not [e for e in estimates if e.status == Status.VALID]
-    least = 20 if (scenario, factor) == ("ice", 0.5) else 100
+    least = 10 if (scenario, factor) == ("ice", 0.5) else 100
     assert pipeline.stats.faults["brake pressure disagrees with deceleration"] > least
-    assert Status.FAULT in {e.status for e in estimates}
+    if (scenario, factor) != ("ice", 0.5):
+        assert Status.FAULT in {e.status for e in estimates}
+
+
+def test_a_head_wind_on_ice_is_weather_not_a_pressure_fault():
+    # Campaign stop 360 with its sensors made ideal: a slip-controlled stop from 139 km/h, snow
+    # then ice, brakes 13-15 % stronger than configured, a 5 m/s head wind the config knows
+    # nothing of. On the ice the wind's drag is a large share of the tyres' force, and the body
+    # equation needed more torque than the pressures gave, beyond the gain limits: FAULT for
+    # 58 outputs of a normal emergency stop.
+    from frictiond.campaign.draw import draw_stop
+    from frictiond.campaign.simulate import simulate_stop
+
+    spec = draw_stop(360, None, clean_sensors=True)
+    assert spec.wind_mps > 4.5 and spec.surfaces[-1].label == "ice"
+    stop = simulate_stop(spec)
+    pipeline = Pipeline(stop.config("lugre-tr"))
+    statuses = [pipeline.last_estimate.status for frame in stop.frames if pipeline.process(frame)]
+    assert Status.FAULT not in statuses and statuses.count(Status.VALID) > 300

@@ -42,13 +42,12 @@ from collections import deque
 from dataclasses import dataclass
 
 NO_ACTIVITY = (False, False, False, False)
-MIN_RELEASE_DROP_BAR = 5.0   # the drop a release needs from a sensor no noisier than 0.6 bar
 
 
 @dataclass(frozen=True, slots=True)
 class AbsActivityOptions:
     window_s: float = 0.3            # a wheel's pressure is compared with its own maximum over this
-    min_drop_bar: float = MIN_RELEASE_DROP_BAR   # a release: at least this far below that maximum ...
+    min_drop_bar: float = 5.0        # a release: at least this far below that maximum ...
     noise_drop_ratio: float = 8.0    # ... or this many σ of the sensors' noise, if more, ...
     min_drop_ratio: float = 0.25     # ... and this share of it
     min_relative_drop: float = 0.10  # or this share more than the demand (other wheels) fell
@@ -81,10 +80,14 @@ class AbsActivity:
             drop = max(o.min_drop_bar, o.noise_drop_ratio * sigma_bar)
         self._min_drop_bar = drop
 
-    @property
-    def min_drop_bar(self) -> float:
-        """The drop that counts as a release now: `min_drop_bar`, or more for a noisy sensor."""
-        return self._min_drop_bar
+    def noise_note(self, sigma_bar: float | None) -> str | None:
+        """What a user is told when the sensors' noise `sigma_bar` raised the drop a release
+        needs above `min_drop_bar`; None when it did not."""
+        if sigma_bar is None or self._min_drop_bar <= self.options.min_drop_bar:
+            return None
+        return (f"the brake-pressure sensors are noisy (σ {sigma_bar:.2f} bar measured): a wheel's pressure counts "
+                f"as released by the ABS only from a {self._min_drop_bar:.1f} bar drop "
+                f"({self.options.min_drop_bar:g} bar for quieter sensors)")
 
     def reset(self) -> None:
         for q in self._maxima:

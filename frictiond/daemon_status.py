@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import logging
 
-from .abs_activity import MIN_RELEASE_DROP_BAR
-
 log = logging.getLogger("frictiond.daemon")
 
 
@@ -51,11 +49,11 @@ class DaemonStatus:
                         "and the staleness limits are sized from the DBC; fix its GenMsgCycleTime",
                         fe.trigger_message, 1e3 * (fe.measured_period_s or 0.0),
                         1e3 * fe.declared_period_s)
-        if not self._noise_told and fe.release_drop_bar > MIN_RELEASE_DROP_BAR:
-            self._noise_told = True
-            log.warning("the brake-pressure sensors are noisy (σ %.2f bar measured): a wheel's pressure counts "
-                        "as released by the ABS only from a %.1f bar drop (%g bar for quieter sensors)",
-                        fe.pressure_noise_bar or 0.0, fe.release_drop_bar, MIN_RELEASE_DROP_BAR)
+        if not self._noise_told:
+            note = fe.pressure_noise_note()
+            if note is not None:
+                self._noise_told = True
+                log.warning("%s", note)
         dt = now - self._status_at
         if dt > 0:
             self._fps = (self.stats.rx_frames - self._status_rx) / dt

@@ -365,10 +365,10 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
         """The brake-pressure sensors' noise σ as measured (`pressure_noise`), None until known."""
         return self._pressure_noise.sigma()
 
-    @property
-    def release_drop_bar(self) -> float:
-        """How far a wheel's pressure must fall to count as an ABS release (`abs_activity`)."""
-        return self._abs_activity.min_drop_bar
+    def pressure_noise_note(self) -> str | None:
+        """A line for the user when the pressure sensors are too noisy for the usual ABS-release
+        threshold (`AbsActivity.noise_note`); None otherwise."""
+        return self._abs_activity.noise_note(self._pressure_noise.sigma())
 
     def _mark_abs_activity(self, sample: PhysicalSample) -> None:
         """`sample.abs_active`: the wheels an ABS is working (see `abs_activity`), from the

@@ -8,7 +8,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Protocol
 
-from .abs_activity import MIN_RELEASE_DROP_BAR
 from .busio import LogFrames
 from .frames import Frame
 from .input_quality import LEAVE_VALID_SHARE
@@ -53,9 +52,8 @@ class ReplaySummary:
     unjoined: dict = field(default_factory=dict)
     # Cycle times the DBC does not give, measured from the first frames and used (`cycle_times`).
     measured_cycles: dict = field(default_factory=dict)
-    # The pressure sensors' noise as measured, and the drop an ABS release needs (`abs_activity`).
-    pressure_noise_bar: float | None = None
-    release_drop_bar: float = 0.0
+    # The pressure sensors too noisy for the usual ABS-release threshold, as a user is told.
+    pressure_noise_note: str | None = None
 
     @property
     def update_period_s(self) -> float:
@@ -102,10 +100,8 @@ class ReplaySummary:
                          + "; ".join(f"{k or 'another wheel-speed message'} silent around {v} of them"
                                      for k, v in sorted(self.unjoined.items()))
                          + " (its wheels' speeds not known at their instants)")
-        if self.pressure_noise_bar is not None and self.release_drop_bar > MIN_RELEASE_DROP_BAR:
-            lines.append(f"pressure noise    σ {self.pressure_noise_bar:.2f} bar measured on the brake-pressure sensors: "
-                         f"a wheel's pressure counts as released by the ABS only from a {self.release_drop_bar:.1f} bar "
-                         f"drop ({MIN_RELEASE_DROP_BAR:g} bar for quieter sensors)")
+        if self.pressure_noise_note:
+            lines.append(f"pressure noise    {self.pressure_noise_note}")
         if self.relaxation_m > 0.0:
             lines.append(f"tyre lag          relaxation length {self.relaxation_m:.2f} m learnt from the μ–slip loops, "
                          "corrected before the fit")
@@ -165,7 +161,7 @@ def replay_frames(
         dict(pipeline.front_end.gate.counts), pipeline.front_end.gate.suspect_share(), pipeline.relaxation.sigma_m,
         dict(pipeline.wheel_join.dropped_by) if pipeline.wheel_join is not None else {},
         dict(pipeline.measured_cycle_times),
-        pipeline.front_end.pressure_noise_bar, pipeline.front_end.release_drop_bar,
+        pipeline.front_end.pressure_noise_note(),
     )
 
 

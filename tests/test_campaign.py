@@ -18,6 +18,7 @@ from frictiond.campaign.run import load_rows, run_campaign, save_rows
 from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, REAR_WHEEL_MESSAGE, WHEEL_MESSAGE
 from frictiond.campaign.simulate import simulate_stop
 from frictiond.campaign.tyres import BURCKHARDT_SURFACES, TyreCurve
+from frictiond.campaign.vehicle import GRAVITY_MPS2
 
 CAMPAIGN = Path(draw_mod.__file__).parent
 
@@ -145,7 +146,7 @@ def test_the_air_drag_is_that_of_the_car_in_its_wind():
     # Rolling free before the brakes, the car slows by its drag alone: ½ρC_dA (v + w)|v + w| over
     # its mass, a head wind w adding to the air's speed, a tail wind taking from it. (Within 5 %:
     # the tyres also spin the wheels down, 3 % of the car's mass in rotating inertia.)
-    base = draw_stop(7, "a/burckhardt/straight")
+    base = dataclasses.replace(draw_stop(7, "a/burckhardt/straight"), grade=0.0)
     decel = {}
     for wind in (-5.0, 0.0, 5.0):
         stop = simulate_stop(dataclasses.replace(base, wind_mps=wind), keep_trace=True)
@@ -156,6 +157,27 @@ def test_the_air_drag_is_that_of_the_car_in_its_wind():
         assert decel[wind] == pytest.approx(car.drag_area_coefficient * (v + wind) * abs(v + wind) / car.true_mass_kg,
                                             rel=0.05)
     assert decel[-5.0] < decel[0.0] < decel[5.0]
+
+
+@pytest.mark.parametrize("grade", [-0.06, 0.06])
+def test_on_a_grade_the_accelerometer_reads_the_forces_and_the_car_slows_by_gravity_too(grade):
+    # Rolling free, the car's speed changes by its drag and gravity's share along the road, while
+    # the accelerometer reads the drag alone (the contact and air forces over the mass); stopped
+    # on its brakes, it stays at rest and the accelerometer reads gravity's share.
+    base = dataclasses.replace(draw_stop(1, "a/burckhardt/straight"), grade=grade, wind_mps=0.0)   # dry, 60 km/h
+    stop = simulate_stop(base, keep_trace=True)
+    tr = stop.trace
+    rolling = (tr.t > 0.2) & (tr.t < base.pre_roll_s - 0.1)
+    along = GRAVITY_MPS2 * math.sin(math.atan(grade))
+    # (the drag, 0.06 m/s² at 60 km/h, and the tyres' force spinning the wheels up or down with
+    # the car, 3 % of its mass in inertia: a small part of gravity's share)
+    assert abs(float(np.mean(tr.ax[rolling]))) < 0.25 * abs(along)
+    speed_change = np.polyfit(tr.t[rolling], tr.v[rolling], 1)[0]
+    assert speed_change == pytest.approx(float(np.mean(tr.ax[rolling])) - along, rel=0.02)
+    assert abs(speed_change) > 0.5
+    at_rest = (tr.v == 0.0) & (tr.master > 1.0)
+    assert at_rest.sum() > 100 and tr.v[-1] == 0.0
+    assert np.allclose(tr.ax[at_rest][1:], along)   # (from the step after the one it stopped in)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 4, 5])

@@ -111,6 +111,7 @@ class StopSpec:
     # The tyres' lateral grip over their longitudinal grip: the friction ellipse's other axis.
     lateral_capacity: float = 1.0
     wind_mps: float = 0.0               # along the road, a head wind positive (the air drag's speed is v + w)
+    grade: float = 0.0                  # the road's rise over its run along the travel, uphill positive
     release_at_s: float | None = None   # after the brake onset
     release_for_s: float = 0.0
     dt_s: float = 0.001

@@ -115,7 +115,7 @@ def spec_fields(spec: StopSpec) -> dict[str, Any]:
         "wheel_hz": sensors.wheel_hz, "resolution_kmh": sensors.wheel_resolution_kmh,
         "drop_rate": round(sensors.drop_rate, 4), "accel_offset": round(sensors.accel_offset_mps2, 3),
         "master_only": sensors.master_only, "reference_speed": sensors.reference_speed,
-        "abs_flags": sensors.abs_flags, "wind_mps": round(spec.wind_mps, 2),
+        "abs_flags": sensors.abs_flags, "wind_mps": round(spec.wind_mps, 2), "grade": round(spec.grade, 4),
         "wheel_messages": sensors.wheel_messages, "cycle_times_in_dbc": sensors.cycle_times_in_dbc,
     }
 

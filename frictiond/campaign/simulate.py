@@ -131,6 +131,8 @@ class _Integrator:
         self.pressure = [0.0] * 4
         self.driver = 0.0
         self.ax = 0.0
+        angle = math.atan(spec.grade)
+        self.gravity_along, self.gravity_normal = GRAVITY_MPS2 * math.sin(angle), GRAVITY_MPS2 * math.cos(angle)
         self.ax_lagged = 0.0
         self.commands = [WheelCommand(0.0, 1500.0)] * 4
         self.brake_on_s = spec.pre_roll_s
@@ -247,8 +249,16 @@ class _Integrator:
         # blown along by a tail wind)
         air = self.v + self.spec.wind_mps if self.v > 0.0 else 0.0
         drag = car.drag_area_coefficient * air * abs(air)
+        # `ax` is what an accelerometer reads, the contact and air forces over the mass; on a
+        # grade the car's speed changes by that less gravity's share along the road.
         self.ax = -(sum(self.force) + drag) / car.true_mass_kg
-        self.v = max(self.v + self.ax * dt, 0.0)
+        accel = self.ax - self.gravity_along
+        if self.v <= 0.0 and self.driver > 1.0:
+            # At rest on its brakes: the tyres' static grip holds the car against gravity's share
+            # (the draw keeps the grade within what the road's grip holds), and that is what the
+            # accelerometer reads.
+            self.ax, accel = self.gravity_along, 0.0
+        self.v = max(self.v + accel * dt, 0.0)
         self.x += self.v * dt
         self.ax_lagged += (self.ax - self.ax_lagged) * dt / max(car.pitch_lag_s, dt)
 
@@ -263,7 +273,7 @@ class _Integrator:
             slip = [_slip(g, r * w) for g, w in zip(ground, self.omega)]
             self.step_driver(t)
             self.step_hydraulics(k, t, ground, slip, [self.peaks[s][1] for s in surfaces])
-            fz = normal_loads(self.car, self.ax_lagged, ay)
+            fz = normal_loads(self.car, self.ax_lagged, ay, self.gravity_normal)
             lateral = self.lateral_use(ground, ay, surfaces)
             omega_dot = self.step_wheels(ground, fz, surfaces, lateral)
             braking = 1.0 if self.driver > 1.0 and self.v > BRAKING_MIN_SPEED_MPS else 0.0

@@ -65,9 +65,12 @@ class CarSpec:
         }
 
 
-def normal_loads(car: CarSpec, accel_long_mps2: float, accel_lat_mps2: float) -> list[float]:
-    """F_N per wheel (FL, FR, RL, RR) [N]: forward-positive a_x, left-positive a_y (model.md)."""
-    m, g, h, l = car.true_mass_kg, GRAVITY_MPS2, car.cg_height_m, car.wheelbase_m
+def normal_loads(car: CarSpec, accel_long_mps2: float, accel_lat_mps2: float,
+                 gravity_normal_mps2: float = GRAVITY_MPS2) -> list[float]:
+    """F_N per wheel (FL, FR, RL, RR) [N]: forward-positive a_x, left-positive a_y (model.md).
+    The accelerations are the contact forces' (what an accelerometer reads): on a grade the
+    gravity along the road shifts no load, its normal share `gravity_normal_mps2` carries it."""
+    m, g, h, l = car.true_mass_kg, gravity_normal_mps2, car.cg_height_m, car.wheelbase_m
     front = m * (g * car.cg_to_rear_m - h * accel_long_mps2) / l
     rear = m * (g * car.cg_to_front_m + h * accel_long_mps2) / l
     lat = h * accel_lat_mps2 / (car.track_m * g)

@@ -38,12 +38,19 @@ from frictiond.pipeline import Pipeline  # noqa: E402
 VARIANTS = ("measured", "fixed 5 bar")
 
 
-def run_stop(seed: int, noise_bar: float, variant: str) -> tuple[int, str, int, int, float]:
-    """(seed, ABS family, VALID outputs, false VALID, measured noise / true) of one stop."""
+def run_stop(seed: int, noise_bar: float, variant: str, level: bool = False) -> tuple[int, str, int, int, float]:
+    """(seed, ABS family, VALID outputs, false VALID, measured noise / true) of one stop; `level`:
+    on level ground with the front end told so (`level_road`), as the stops were before the
+    campaign drew grades."""
     spec = draw_stop(seed)
     spec = replace(spec, sensors=replace(spec.sensors, pressure_noise_bar=noise_bar))
+    if level:
+        spec = replace(spec, grade=0.0)
     stop = simulate_stop(spec)
-    pipeline = Pipeline(stop.config("lugre-tr"))
+    config = stop.config("lugre-tr")
+    if level:
+        config = replace(config, frontend=replace(config.frontend, level_road=True))
+    pipeline = Pipeline(config)
     estimates = []
     held = nullcontext() if variant == "measured" else mock.patch.object(AbsActivity, "set_noise", lambda s, sigma: None)
     with held:

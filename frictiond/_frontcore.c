@@ -479,7 +479,7 @@ enum {
     K_MAX_ALL_WHEEL_SLIP, K_SAMPLE_PERIOD, K_BIAS_TAU, K_MASS, K_CG_HEIGHT, K_CG_FRONT, K_CG_REAR, K_TRACK_FRONT,
     K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
     K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_MASTER_ONLY, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
-    K_LAG_COMPENSATION, K_BIAS_SETTLE, K_CORRECTION_RATE, K_CORRECTION_HOLD, K_COUNT
+    K_LAG_COMPENSATION, K_BIAS_SETTLE, K_CORRECTION_RATE, K_CORRECTION_HOLD, K_DRAG_DOUBT, K_WIND_DOUBT, K_LEVEL_ROAD, K_COUNT
 };
 
 #define MAX_ABS_ACCEL 30.0
@@ -497,6 +497,8 @@ enum {
 #define UNLEARNT_ACCEL_TOLERANCE 0.3
 #define ACCEL_BIAS_LEARNT_SAMPLES 50
 #define ACCEL_BIAS_PRIOR_SAMPLES 2.0
+#define SENSOR_OFFSET_PRIOR_S 0.2      /* body_equation.SENSOR_OFFSET_PRIOR_S */
+#define SENSOR_OFFSET_LIMIT 1.0        /* body_equation.SENSOR_OFFSET_LIMIT_MPS2 */
 #define PRESSURE_SENSOR_LAG 0.04
 #define MAX_PRESSURE_LAG 0.05
 #define MIN_PRESSURE_LAG 0.002
@@ -511,7 +513,8 @@ enum {
 
 /* The FrontEnd attributes sample_physics reads and writes. */
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples, *A_bias_m2,
-    *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn,
+    *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn, *A_gain_t, *A_gain_n,
+    *A_gain_w, *A_sensor_offset, *A_sensor_offset_doubt,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_gain_doubt, *A_model_holds, *A_released,
     *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_restarted_braking;
 
@@ -524,7 +527,7 @@ typedef struct {
     double last_sample, bias, unexplained, speed_time, speed_est, slipping_time, faster_since;
     long bias_samples, ref_disagreements;
     double bias_m2;
-    double gain_tt, gain_tn, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor, gain_doubt;
+    double gain_tt, gain_tn, gain_t, gain_n, gain_w, sensor_offset, sensor_offset_doubt, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor, gain_doubt;
     double unjudged;
     int model_holds, released;
     double lag[LAG_N];
@@ -614,6 +617,10 @@ static int load_state(PyObject *fe, FEState *s)
         || get_bool_attr(fe, A_restarted_braking, &s->restarted_braking) < 0
         || get_long_attr(fe, A_ref_disagreements, &s->ref_disagreements) < 0
         || get_float_attr(fe, A_gain_tt, &s->gain_tt, NULL) < 0 || get_float_attr(fe, A_gain_tn, &s->gain_tn, NULL) < 0
+        || get_float_attr(fe, A_gain_t, &s->gain_t, NULL) < 0 || get_float_attr(fe, A_gain_n, &s->gain_n, NULL) < 0
+        || get_float_attr(fe, A_gain_w, &s->gain_w, NULL) < 0
+        || get_float_attr(fe, A_sensor_offset, &s->sensor_offset, NULL) < 0
+        || get_float_attr(fe, A_sensor_offset_doubt, &s->sensor_offset_doubt, NULL) < 0
         || get_float_attr(fe, A_recent_weight, &s->recent_weight, NULL) < 0
         || get_float_attr(fe, A_recent_lag, &s->recent_lag, NULL) < 0
         || get_float_attr(fe, A_last_brake, &s->last_brake, NULL) < 0
@@ -694,6 +701,11 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_ref_disagreements, PyLong_FromLong(s->ref_disagreements)) < 0
         || set_attr_new(fe, A_gain_tt, PyFloat_FromDouble(s->gain_tt)) < 0
         || set_attr_new(fe, A_gain_tn, PyFloat_FromDouble(s->gain_tn)) < 0
+        || set_attr_new(fe, A_gain_t, PyFloat_FromDouble(s->gain_t)) < 0
+        || set_attr_new(fe, A_gain_n, PyFloat_FromDouble(s->gain_n)) < 0
+        || set_attr_new(fe, A_gain_w, PyFloat_FromDouble(s->gain_w)) < 0
+        || set_attr_new(fe, A_sensor_offset, PyFloat_FromDouble(s->sensor_offset)) < 0
+        || set_attr_new(fe, A_sensor_offset_doubt, PyFloat_FromDouble(s->sensor_offset_doubt)) < 0
         || set_attr_new(fe, A_recent_weight, PyFloat_FromDouble(s->recent_weight)) < 0
         || set_attr_new(fe, A_recent_lag, PyFloat_FromDouble(s->recent_lag)) < 0
         || set_attr_new(fe, A_last_brake, PyFloat_FromDouble(s->last_brake)) < 0
@@ -867,7 +879,7 @@ static void learn_pressure_lag(FEState *s, const double *k, double brake, double
     s->lag[0] = s_bb, s->lag[1] = s_bd, s->lag[2] = s_dd, s->lag[3] = s_bn, s->lag[4] = s_dn;
 }
 
-/* body_equation.offset_doubt_mps2: what the learnt accelerometer offset may still be off by. */
+/* body_equation.offset_doubt_mps2: what the offset learnt from free rolling may still be off by. */
 static double offset_doubt(long samples, double sum_squares)
 {
     if (samples >= ACCEL_BIAS_LEARNT_SAMPLES)
@@ -875,6 +887,32 @@ static double offset_doubt(long samples, double sum_squares)
     const double variance = (sum_squares + ACCEL_BIAS_PRIOR_SAMPLES * UNLEARNT_ACCEL_TOLERANCE * UNLEARNT_ACCEL_TOLERANCE)
                             / ((double)(samples > 1 ? samples - 1 : 0) + ACCEL_BIAS_PRIOR_SAMPLES);
     return py_min(UNLEARNT_ACCEL_TOLERANCE, sqrt(3.0 * variance / (double)(samples > 1 ? samples : 1)));
+}
+
+/* body_equation.gain_and_sensor_offset: the brake gain (returned) and the accelerometer's offset
+ * (*offset) of N = G·T − M·R·s by least squares with a prior of s = 0, and what s may be off by. */
+static double gain_and_sensor_offset(const FEState *s, double prior_samples, double mass_radius, double *offset,
+                                     double *doubt)
+{
+    const double a11 = s->gain_tt, a12 = s->gain_t, a22 = s->gain_w + prior_samples;
+    const double det = a11 * a22 - a12 * a12;
+    if (!(det > 0.0 && isfinite(det))) {
+        *offset = 0.0;
+        *doubt = UNLEARNT_ACCEL_TOLERANCE;
+        return s->gain_tn / s->gain_tt;
+    }
+    const double tolerance = UNLEARNT_ACCEL_TOLERANCE;
+    const double fit = -(a11 * s->gain_n - a12 * s->gain_tn) / det / mass_radius;
+    const double spread = tolerance * sqrt(py_min(1.0, prior_samples * a11 / det));
+    if (fabs(fit) > tolerance) {
+        *offset = copysign(tolerance, fit);
+        *doubt = tolerance;
+    } else {
+        const double low = py_max(-tolerance, fit - spread), high = py_min(tolerance, fit + spread);
+        *offset = 0.5 * (low + high);
+        *doubt = 0.5 * (high - low);
+    }
+    return (s->gain_tn + mass_radius * *offset * s->gain_t) / s->gain_tt;
 }
 
 /* body_equation.gain_within_offset_ambiguity: the middle of what the gain limits (1 ± limits) and
@@ -943,8 +981,7 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
     s->recent_lag = recent * s->recent_lag + total_brake * PRESSURE_SENSOR_LAG * brake_rate;
     const double window_ratio = s->recent_needed / s->recent_brake;
     const double gains = k[K_BRAKE_GAIN_FL] + k[K_BRAKE_GAIN_FR] + k[K_BRAKE_GAIN_RL] + k[K_BRAKE_GAIN_RR];
-    const double accel_tolerance = BODY_ACCEL_TOLERANCE
-                                   + (s->bias_samples < ACCEL_BIAS_LEARNT_SAMPLES ? UNLEARNT_ACCEL_TOLERANCE : 0.0);
+    const double accel_tolerance = BODY_ACCEL_TOLERANCE + s->sensor_offset_doubt;
     const double tolerance = k[K_MASS] * k[K_RADIUS] * accel_tolerance + PRESSURE_TOLERANCE * gains;
     const int resolved = unexplained_torque(s, 1.0, 1.0) > tolerance;
     const double wind = k[K_DRAG] * FAULT_WIND * (2.0 * speed + FAULT_WIND) * k[K_RADIUS];
@@ -959,17 +996,36 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
     if (!released) {
         if (k[K_LAG_COMPENSATION] != 0.0)
             learn_pressure_lag(s, k, raw_brake, raw_rate, needed);
-        ratio = py_min(py_max(ratio, 1.0 - lim), 1.0 + lim);
+        /* (body_equation.BodyEquation._learn_brake_gain) */
+        const double mass_radius = k[K_MASS] * k[K_RADIUS], band = mass_radius * SENSOR_OFFSET_LIMIT;
         const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_GAIN_TAU], 1e-3));
-        const double weight = total_brake * total_brake;
-        s->gain_tt = keep * s->gain_tt + weight;
-        s->gain_tn = keep * s->gain_tn + weight * ratio;
+        double gain;
+        if (k[K_LEVEL_ROAD] != 0.0) {
+            ratio = py_min(py_max(ratio, 1.0 - lim), 1.0 + lim);
+            s->gain_tt = keep * s->gain_tt + total_brake * total_brake;
+            s->gain_tn = keep * s->gain_tn + total_brake * total_brake * ratio;
+            gain = s->gain_tn / s->gain_tt;
+        } else {
+            const double raw = needed - mass_radius * s->sensor_offset;
+            const double n = py_min(py_max(raw, (1.0 - lim) * total_brake - band), (1.0 + lim) * total_brake + band);
+            s->gain_tt = keep * s->gain_tt + total_brake * total_brake;
+            s->gain_tn = keep * s->gain_tn + total_brake * n;
+            s->gain_t = keep * s->gain_t + total_brake;
+            s->gain_n = keep * s->gain_n + n;
+            s->gain_w = keep * s->gain_w + 1.0;
+            gain = gain_and_sensor_offset(s, SENSOR_OFFSET_PRIOR_S / k[K_SAMPLE_PERIOD], mass_radius,
+                                          &s->sensor_offset, &s->sensor_offset_doubt);
+        }
         /* (body_equation.BodyEquation._unlearnt_offset_torque_nm) */
-        const double doubt = offset_doubt(s->bias_samples, s->bias_m2);
+        const double doubt = s->sensor_offset_doubt;
         const double ambiguity = doubt > 0.0 && s->recent_brake > 0.0
-            ? k[K_MASS] * k[K_RADIUS] * doubt / py_max(s->recent_brake / py_max(s->recent_weight, 1e-9), 1e-9)
+            ? mass_radius * doubt / py_max(s->recent_brake / py_max(s->recent_weight, 1e-9), 1e-9)
             : 0.0;
-        s->gain_factor = gain_within_offset_ambiguity(s->gain_tn / s->gain_tt, lim, ambiguity, &s->gain_doubt);
+        if (k[K_LEVEL_ROAD] == 0.0 && !(1.0 - lim <= gain && gain <= 1.0 + lim)) {
+            s->gain_factor = py_min(py_max(gain, 1.0 - lim), 1.0 + lim);
+            s->gain_doubt = lim;
+        } else
+            s->gain_factor = gain_within_offset_ambiguity(gain, lim, ambiguity, &s->gain_doubt);
     }
 }
 
@@ -1078,7 +1134,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     int any_failed = 0, all_failed = 1, braking = 0, driving = 0, any_stuck = 0;
     for (int i = 0; i < NW; i++) {
         wl[i] = radius * omega[i];
-        stuck[i] = fabs(a_raw) > 0.5 ? (double)s.repeats[i] >= k[K_STUCK_FRAMES] : 0;
+        stuck[i] = fabs(a_raw - s.bias) > 0.5 ? (double)s.repeats[i] >= k[K_STUCK_FRAMES] : 0;
         braked[i] = p[i] - k[K_PUSHOUT] > k[K_MIN_BRAKE_PRESSURE];
         braking |= braked[i];
         driving |= has_drive && fabs(drive[i]) > 20.0;
@@ -1112,7 +1168,14 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         if (omega_dot[i] > 0.0)
             spin_up += omega_dot[i];
     spin_up = k[K_INERTIA] * spin_up / (k[K_RADIUS] * k[K_MASS]);
-    if (!braking && !driving && accel_long + spin_up < -k[K_UNEXPLAINED_DECEL])
+    /* (the contact forces' acceleration, less the air's drag up to its doubt: SensorFaults._deceleration_unexplained) */
+    double v_fast = wl[0];
+    for (int i = 1; i < NW; i++)
+        v_fast = py_max(v_fast, wl[i]);
+    const double v_air = v_fast + k[K_WIND_DOUBT];
+    const double air = (k[K_ROLLING] * v_fast + k[K_DRAG] * v_fast * v_fast + k[K_DRAG_DOUBT] * v_air * v_air
+                        + k[K_DRAG] * k[K_WIND_DOUBT] * (v_fast + v_air)) / k[K_MASS];
+    if (!braking && !driving && a_raw - s.sensor_offset + spin_up + air < -k[K_UNEXPLAINED_DECEL])
         s.unexplained += (s.has_last_sample && s.last_sample != 0.0) ? py_max(0.0, t_c - s.last_sample) : 0.0;
     else
         s.unexplained = 0.0;
@@ -1144,6 +1207,10 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
             const double before = s.bias;
             s.bias += alpha * (error - before);
             s.bias_m2 += (error - before) * (error - s.bias);
+            if (k[K_LEVEL_ROAD] != 0.0) {
+                s.sensor_offset = s.bias;
+                s.sensor_offset_doubt = offset_doubt(s.bias_samples, s.bias_m2);
+            }
         }
     }
     double yaw_rate = 0.0;
@@ -1155,8 +1222,9 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
 
     /* VehicleParams.normal_forces */
     const double h = k[K_CG_HEIGHT], wheelbase = k[K_CG_FRONT] + k[K_CG_REAR];
-    const double front_axle = k[K_MASS] * (GRAVITY * k[K_CG_REAR] - h * accel_long) / wheelbase;
-    const double rear_axle = k[K_MASS] * (GRAVITY * k[K_CG_FRONT] + h * accel_long) / wheelbase;
+    const double accel_contact = a_raw - s.sensor_offset;   /* (on a grade gravity shifts no load) */
+    const double front_axle = k[K_MASS] * (GRAVITY * k[K_CG_REAR] - h * accel_contact) / wheelbase;
+    const double rear_axle = k[K_MASS] * (GRAVITY * k[K_CG_FRONT] + h * accel_contact) / wheelbase;
     const double lat_f = h * a_lat / (k[K_TRACK_FRONT] * GRAVITY), lat_r = h * a_lat / (k[K_TRACK_REAR] * GRAVITY);
     const double loads[NW] = {front_axle * (0.5 - lat_f), front_axle * (0.5 + lat_f), rear_axle * (0.5 - lat_r),
                               rear_axle * (0.5 + lat_r)};
@@ -1194,7 +1262,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     for (int i = 0; i < NW; i++)
         inertia[i] = k[K_INERTIA] * torque_omega_dot[i];
     if (k[K_GAIN_CORRECTION] != 0.0 && !glitch)
-        update_brake_gain(&s, k, accel_matched - s.bias, speed, inertia, torques, drive, wl, rates, braking);
+        update_brake_gain(&s, k, accel_matched - s.sensor_offset, speed, inertia, torques, drive, wl, rates, braking);
     const double gain = s.gain_factor;
     /* A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ. */
     for (int i = 0; i < NW; i++)
@@ -1265,6 +1333,8 @@ static int intern_attributes(void)
         {&A_bias_samples, "_accel_bias_samples"}, {&A_bias_m2, "_accel_bias_m2"}, {&A_unexplained, "_unexplained_s"},
         {&A_speed_time, "_speed_time_s"}, {&A_speed_est, "_speed_estimate_mps"},
         {&A_ref_disagreements, "_ref_disagreements"}, {&A_gain_tt, "_gain_sum_tt"}, {&A_gain_tn, "_gain_sum_tn"},
+        {&A_gain_t, "_gain_sum_t"}, {&A_gain_n, "_gain_sum_n"}, {&A_gain_w, "_gain_sum_w"},
+        {&A_sensor_offset, "_sensor_offset_mps2"}, {&A_sensor_offset_doubt, "_sensor_offset_doubt_mps2"},
         {&A_recent_weight, "_recent_weight_nm"},
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"}, {&A_gain_doubt, "_brake_gain_doubt"},

@@ -4,8 +4,11 @@ M·dv/dt = −ΣF_x − B·v − D·v² (model.md) says what torque the brakes g
 torque the pressures say, it gives a brake-gain correction (pads move ±20 % in service, and the
 gain absorbs the car's load), the pressure sensors' lag, and a verdict: the pressures do not say
 what the brakes do (a fault), or, on a car sending one master-cylinder pressure, an ABS has released
-wheels (no wheel's brake torque is known from then on). While the car rolls free the same balance
-gives the accelerometer's offset. `BodyEquation` is a part of `frontend.FrontEnd`: its state lives
+wheels (no wheel's brake torque is known from then on); and, as the intercept of that gain's fit,
+the accelerometer's own offset. While the car rolls free the wheels give what the accelerometer
+reads beyond their acceleration: its offset and, on a grade, gravity's share, which only the
+speed estimate may take off (the brakes and the tyres' loads feel no gravity along the road).
+`BodyEquation` is a part of `frontend.FrontEnd`: its state lives
 on the front end, where the compiled `_frontcore.sample_physics` reads and writes it by these
 names; the code here is the fallback without a C compiler and the reference (tests compare).
 """
@@ -19,16 +22,25 @@ _BRAKE_MODEL_WINDOW_S = 0.2                 # the body check's window: about thi
 # A wheel slower than this share of the car's speed (and 0.3 m/s) is locked: its brake clamps it
 # and passes only the tyre's sliding force, not the torque its pressure could give.
 LOCKED_WHEEL_RATIO = 0.05      # (also in _frontcore.c)
-# What the body equation cannot resolve, as a torque: an accelerometer offset and the road's grade
+# What the body equation cannot resolve, as a torque: what is left of an accelerometer offset
 # (this much of a deceleration) and each wheel's pressure offset (bar, times its gain). A smaller
 # disagreement proves no signal wrong, however large its ratio (ice, where the brake torques are
 # of the order of the wheels' inertia torques). (Also in _frontcore.c.)
 BODY_ACCEL_TOLERANCE_MPS2 = 0.05
 PRESSURE_TOLERANCE_BAR = 0.25
-# ... and until free rolling has taught the accelerometer's offset (this many samples), the
-# offset a sensor may have (a fault seen right after start-up would be the accelerometer's).
+# ... and the offset a sensor may have, on top, until the body equation has told it from the
+# gain (a fault seen right after start-up would be the accelerometer's); also how far the offset
+# for the speed estimate may be off until free rolling has taught it (this many samples).
 UNLEARNT_ACCEL_TOLERANCE_MPS2 = 0.3
 ACCEL_BIAS_LEARNT_SAMPLES = 50
+# The accelerometer's own offset, told from the brake gain by the body equation over braking
+# (`gain_and_sensor_offset`): a prior of none weighing like this much braking at a steady torque
+# (the body equation's residuals stay correlated for ~0.05 s and carry the axles' gain split and
+# the pressure sensors' lag, which a lighter prior reads as offset: on dev stops at a 5 % grade
+# its error was least from 0.1 to 0.2 s, and covered by its doubt in 86 % of them at 0.2 s), and
+# each sample's disagreement taken as at most this much of an offset. (Also in _frontcore.c.)
+SENSOR_OFFSET_PRIOR_S = 0.2
+SENSOR_OFFSET_LIMIT_MPS2 = 1.0
 # A wind along the road the config cannot know (m/s, a gentle breeze): the drag it adds or takes
 # away is weather, not a broken pressure signal, and the fault verdict allows for it (at 25 m/s a
 # 5 m/s head wind is 110 N more drag, a fifth of the tyres' force on μ 0.034 ice; wind_doubt, 0
@@ -54,7 +66,8 @@ PRESSURE_LAG_TIME_CONSTANT_S = 5.0
 _PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
 # What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
-LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_needed_nm",
+LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_gain_sum_w",
+                 "_sensor_offset_mps2", "_sensor_offset_doubt_mps2", "_recent_weight_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
                  "_brake_gain_doubt",
                  "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_accel_bias_m2",
@@ -73,7 +86,12 @@ class BodyEquation:
         self._slipping_time_s = -math.inf   # the newest sample with a braked wheel slipping
         self._brake_gain_factor = 1.0
         self._brake_gain_doubt = 0.0        # what the body equation leaves of its error (`gain_within_offset_ambiguity`)
-        self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T²·ratio
+        self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T·N
+        self._gain_sum_t = self._gain_sum_n = self._gain_sum_w = 0.0       # Σ T, Σ N, Σ 1
+        # The accelerometer's own offset (what it reads beyond the contact and air forces), the
+        # intercept of the gain's regression, and the half-width of what it may still be off by.
+        self._sensor_offset_mps2 = 0.0
+        self._sensor_offset_doubt_mps2 = UNLEARNT_ACCEL_TOLERANCE_MPS2
         # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...
         self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
         self._recent_lag_nm = 0.0          # ... Σ T × what the pressure sensors' lag may hide (signed)
@@ -96,7 +114,8 @@ class BodyEquation:
     @property
     def brake_gain_doubt(self) -> float:
         """How far the brake gain may still be off, as a share of it (the half-width of what the
-        gain limits and the body equation allow): 0 once the accelerometer's offset is learnt."""
+        gain limits and the body equation allow): what the accelerometer's offset may still be
+        off by, over the deceleration."""
         return self._brake_gain_doubt
 
     @property
@@ -120,7 +139,8 @@ class BodyEquation:
 
     @property
     def accel_offset_doubt_mps2(self) -> float:
-        """The standard error of the accelerometer offset learnt so far (m/s²): 0 once learnt."""
+        """The standard error of the accelerometer offset learnt from free rolling so far (m/s²),
+        the one the speed estimate takes off: 0 once learnt."""
         return offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2) / math.sqrt(3.0)
 
     @property
@@ -140,7 +160,7 @@ class BodyEquation:
 
     def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float) -> None:
         # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
-        # (or road grade, which the same correction absorbs).
+        # and, on a grade, gravity's share: what the speed estimate takes off, not the forces.
         wheel_accel = self.vehicle.wheel_radius * (sum(omega_dot) / len(omega_dot))
         alpha = min(1.0, self.sample_period_s / max(self.options.accel_bias_time_constant, 1e-3))
         error = accel_long_raw - wheel_accel
@@ -152,6 +172,10 @@ class BodyEquation:
             before = self._accel_bias_mps2
             self._accel_bias_mps2 += alpha * (error - before)
             self._accel_bias_m2 += (error - before) * (error - self._accel_bias_mps2)
+            if self.options.level_road:
+                # (no grade: what free rolling taught is the sensor's own offset)
+                self._sensor_offset_mps2 = self._accel_bias_mps2
+                self._sensor_offset_doubt_mps2 = offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2)
 
     def _update_brake_gain(
         self,
@@ -200,7 +224,7 @@ class BodyEquation:
         if not self._judge_brake_model(total_brake, brake_rate, needed, ratio, speed):
             if opts.pressure_lag_compensation:
                 self._learn_pressure_lag(raw_brake, raw_rate, needed)
-            self._learn_brake_gain(total_brake, ratio)
+            self._learn_brake_gain(total_brake, needed - veh.mass * veh.wheel_radius * self._sensor_offset_mps2)
 
     def _judge_brake_model(self, total_brake: float, brake_rate: float, needed: float, ratio: float,
                            speed: float) -> bool:
@@ -225,8 +249,7 @@ class BodyEquation:
         self._recent_brake_nm = recent * self._recent_brake_nm + total_brake * total_brake
         self._recent_lag_nm = recent * self._recent_lag_nm + total_brake * PRESSURE_SENSOR_LAG_S * brake_rate
         window_ratio = self._recent_needed_nm / self._recent_brake_nm
-        accel_tolerance = BODY_ACCEL_TOLERANCE_MPS2 + (
-            UNLEARNT_ACCEL_TOLERANCE_MPS2 if self._accel_bias_samples < ACCEL_BIAS_LEARNT_SAMPLES else 0.0)
+        accel_tolerance = BODY_ACCEL_TOLERANCE_MPS2 + self._sensor_offset_doubt_mps2
         tolerance = veh.mass * veh.wheel_radius * accel_tolerance + PRESSURE_TOLERANCE_BAR * sum(self._brake_gains)
         resolved = _unexplained_torque(self._recent_needed_nm, self._recent_brake_nm, self._recent_lag_nm,
                                        self._recent_weight_nm, 1.0, 1.0) > tolerance
@@ -247,24 +270,49 @@ class BodyEquation:
         self._brake_model_holds = released or not beyond_gains
         return released
 
-    def _learn_brake_gain(self, total_brake: float, ratio: float) -> None:
-        """The gain is the mean of each sample's ratio (torque the body equation needs / torque the
-        pressures give) weighted by the brake torque squared, with exponential forgetting: the
-        first instants of a stop (a few N·m against a wheel's inertia and a lagging
-        accelerometer: ratios of 50) do not count like full braking. It converges within a
-        stop, which matters because the gain also absorbs the car's load (a 25 % heavier car
-        read 20 % too much μ until learnt); the prior weighs like 10 samples at 1 kN·m.
-        Each sample's own ratio is clipped to the limits first: one wild sample (spoofed wheel
-        speeds give inertia torques of kN·m) moves the sums no more than a plausible one."""
+    def _learn_brake_gain(self, total_brake: float, needed_raw: float) -> None:
+        """The gain and the accelerometer's offset fitted to the torque the body needs from the raw
+        accelerometer, `needed_raw`, against the torque the pressures give (`gain_and_sensor_offset`),
+        by least squares with exponential forgetting: the first instants of a stop (a few N·m
+        against a wheel's inertia and a lagging accelerometer) weigh little against full
+        braking. It converges within a stop, which matters because the gain also absorbs the
+        car's load (a 25 % heavier car read 20 % too much μ until learnt); the gain's prior
+        weighs like 10 samples at 1 kN·m. Each sample is clipped first to what the gain limits
+        and `SENSOR_OFFSET_LIMIT_MPS2` allow: one wild sample (spoofed wheel speeds give inertia
+        torques of kN·m) moves the sums no more than a plausible one."""
         opts = self.options
+        veh = self.vehicle
         lim = opts.brake_gain_limits
-        ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
+        mass_radius = veh.mass * veh.wheel_radius
         keep = self._brake_gain_keep()
-        weight = total_brake * total_brake
-        self._gain_sum_tt = keep * self._gain_sum_tt + weight
-        self._gain_sum_tn = keep * self._gain_sum_tn + weight * ratio
-        self._brake_gain_factor, self._brake_gain_doubt = gain_within_offset_ambiguity(
-            self._gain_sum_tn / self._gain_sum_tt, lim, self._unlearnt_offset_torque_nm())
+        if opts.level_road:
+            # The offset is free rolling's: the gain alone, each sample's ratio clipped to the limits.
+            ratio = (needed_raw + mass_radius * self._sensor_offset_mps2) / total_brake
+            ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
+            self._gain_sum_tt = keep * self._gain_sum_tt + total_brake * total_brake
+            self._gain_sum_tn = keep * self._gain_sum_tn + total_brake * total_brake * ratio
+            self._brake_gain_factor, self._brake_gain_doubt = gain_within_offset_ambiguity(
+                self._gain_sum_tn / self._gain_sum_tt, lim, self._unlearnt_offset_torque_nm())
+            return
+        band = mass_radius * SENSOR_OFFSET_LIMIT_MPS2
+        needed = min(max(needed_raw, (1.0 - lim) * total_brake - band), (1.0 + lim) * total_brake + band)
+        self._gain_sum_tt = keep * self._gain_sum_tt + total_brake * total_brake
+        self._gain_sum_tn = keep * self._gain_sum_tn + total_brake * needed
+        self._gain_sum_t = keep * self._gain_sum_t + total_brake
+        self._gain_sum_n = keep * self._gain_sum_n + needed
+        self._gain_sum_w = keep * self._gain_sum_w + 1.0
+        gain, offset, doubt = gain_and_sensor_offset(
+            self._gain_sum_tt, self._gain_sum_tn, self._gain_sum_t, self._gain_sum_n, self._gain_sum_w,
+            SENSOR_OFFSET_PRIOR_S / self.sample_period_s, mass_radius)
+        self._sensor_offset_mps2, self._sensor_offset_doubt_mps2 = offset, doubt
+        ambiguity = self._unlearnt_offset_torque_nm()
+        if not 1.0 - lim <= gain <= 1.0 + lim:
+            # The body asks for a gain beyond its limits with the offset the fit allows: the
+            # pressures do not say what the brakes do (the verdict's to tell, when it is beyond
+            # the offset's tolerance too), and the gain at its limit is vouched for by nothing.
+            self._brake_gain_factor, self._brake_gain_doubt = min(max(gain, 1.0 - lim), 1.0 + lim), lim
+        else:
+            self._brake_gain_factor, self._brake_gain_doubt = gain_within_offset_ambiguity(gain, lim, ambiguity)
 
     def _brake_gain_keep(self) -> float:
         """What a braking sample leaves of the gain's sums (and `resistance_doubt_share`'s): the
@@ -272,10 +320,10 @@ class BodyEquation:
         return 1.0 - min(1.0, self.sample_period_s / max(self.options.brake_gain_time_constant, 1e-3))
 
     def _unlearnt_offset_torque_nm(self) -> float:
-        """The share of the brakes' torque that what is not yet learnt of the accelerometer's
-        offset may hide: `offset_doubt_mps2` times mass and radius, over the brake-weighted mean
-        brake torque of the last ~0.2 s (0 once the offset is learnt)."""
-        doubt = offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2)
+        """The share of the brakes' torque that what is not yet known of the accelerometer's
+        offset may hide: its doubt times mass and radius, over the brake-weighted mean brake
+        torque of the last ~0.2 s."""
+        doubt = self._sensor_offset_doubt_mps2
         if doubt <= 0.0 or self._recent_brake_nm <= 0.0:
             return 0.0
         veh = self.vehicle
@@ -332,6 +380,41 @@ def offset_doubt_mps2(samples: int, sum_squares: float) -> float:
     prior = ACCEL_BIAS_PRIOR_SAMPLES
     variance = (sum_squares + prior * UNLEARNT_ACCEL_TOLERANCE_MPS2**2) / (max(samples - 1, 0) + prior)
     return min(UNLEARNT_ACCEL_TOLERANCE_MPS2, math.sqrt(3.0 * variance / max(samples, 1)))
+
+
+def gain_and_sensor_offset(sum_tt: float, sum_tn: float, sum_t: float, sum_n: float, sum_w: float,
+                           prior_samples: float, mass_radius: float) -> tuple[float, float, float]:
+    """The brake gain G and the accelerometer's offset s of N = G·T − M·R·s, the torque the body
+    needs (from the raw accelerometer) against the torque the pressures give, fitted by least
+    squares from the sums given (with the gain's prior in them) and a prior of s = 0 weighing like
+    `prior_samples` samples; and the half-width of what s may still be off by.
+
+    The accelerometer reads the contact and air forces plus its offset; on a grade, free rolling
+    teaches the offset and gravity's share together (`_learn_accel_bias`), which the wheels'
+    forces do not feel. Only a torque that varies through the stop (the pedal, an ABS's cycles)
+    tells an offset, constant, from a gain, proportional: with a steady torque the prior stays,
+    and the doubt with it. An offset within the sensor's tolerance is uniform a priori
+    (`UNLEARNT_ACCEL_TOLERANCE_MPS2` its half-width), the doubt that half-width times the
+    posterior's share of the prior's standard deviation."""
+    tolerance = UNLEARNT_ACCEL_TOLERANCE_MPS2
+    a11, a12, a22 = sum_tt, sum_t, sum_w + prior_samples
+    det = a11 * a22 - a12 * a12
+    if not (det > 0.0 and math.isfinite(det)):
+        return sum_tn / sum_tt, 0.0, tolerance
+    offset = -(a11 * sum_n - a12 * sum_tn) / det / mass_radius
+    doubt = tolerance * math.sqrt(min(1.0, prior_samples * a11 / det))
+    # No sensor reads beyond its tolerance: what the fit allows within it (the middle, and the
+    # half-width), and the gain that offset leaves. A steady torque lets the gain's prior pull the
+    # offset anywhere (a pressure reading 2.5 times the brakes' on ice fitted an offset of 0.25
+    # m/s² and a gain at its limit); held within the tolerance the fault verdict still sees it.
+    # A fit beyond the tolerance is a body equation no offset and gain explain (halved pressures
+    # on snow fitted -0.75 m/s²): its edge, vouched for by nothing.
+    if abs(offset) > tolerance:
+        offset, doubt = math.copysign(tolerance, offset), tolerance
+    else:
+        low, high = max(-tolerance, offset - doubt), min(tolerance, offset + doubt)
+        offset, doubt = 0.5 * (low + high), 0.5 * (high - low)
+    return (sum_tn + mass_radius * offset * sum_t) / sum_tt, offset, doubt
 
 
 def gain_within_offset_ambiguity(gain: float, limits: float, ambiguity: float) -> tuple[float, float]:

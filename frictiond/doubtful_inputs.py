@@ -146,6 +146,6 @@ class DoubtfulInputs:
         forces = sum(sample.tyre_force_n) + veh.resistance_force(sample.speed_mps)
         if not math.isfinite(forces):
             return None
-        by_forces = -forces / veh.mass + self._accel_bias_mps2
+        by_forces = -forces / veh.mass + self._sensor_offset_mps2
         return other if abs(other - by_forces) < abs(taken - by_forces) else taken
 

@@ -116,6 +116,12 @@ class FrontEndOptions:
     # Learn the tyre's relaxation length from the μ–slip loops its lag draws under ABS and invert
     # the lag before the fit (`relaxation`; each sample reaches the estimator one sample late).
     relaxation_compensation: bool = True
+    # The car brakes only on level ground (a test track, a simulator without grades): free rolling
+    # then teaches the accelerometer's own offset, and the body equation takes it as known. Off (a
+    # car on public roads): what free rolling teaches includes gravity's share on a grade, which
+    # the brakes and the tyres' loads do not feel; the offset they see is told from the brakes'
+    # gain by the body equation itself (`body_equation.gain_and_sensor_offset`).
+    level_road: bool = False
 
 
     def validate(self) -> None:

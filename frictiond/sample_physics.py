@@ -52,7 +52,8 @@ class SamplePhysics:
             vehicle.rolling_resistance, vehicle.drag_area_coefficient, options.brake_gain_limits,
             options.brake_gain_time_constant, options.max_slip, self._has_drive_torque, self._has_yaw_rate,
             float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation,
-            options.accel_bias_settle_s, options.speed_correction_rate, options.speed_correction_hold_s))
+            options.accel_bias_settle_s, options.speed_correction_rate, options.speed_correction_hold_s,
+            vehicle.drag_area_doubt, vehicle.wind_doubt, options.level_road))
 
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         t_c, omega, omega_dot, glitch = self._fit_wheels()
@@ -83,14 +84,16 @@ class SamplePhysics:
             return FrontEndResult(None, stale, fault)
         drive = self._drive_torques(inputs)
 
-        wheel_linear, stuck, braked, dead = self._wheel_states(t_c, omega, accel_long_raw, pressures)
+        wheel_linear, stuck, braked, dead = self._wheel_states(t_c, omega, accel_long_raw - self._accel_bias_mps2,
+                                                               pressures)
         braking = any(braked)
         if not braking:
             self._brake_released = False    # (a new stop: the master pressure is the wheels' again)
         driving = self._has_drive_torque and any(abs(d) > MIN_DRIVE_TORQUE_NM for d in drive)
 
         accel_long = accel_long_raw - self._accel_bias_mps2
-        if self._deceleration_unexplained(t_c, braking or driving, accel_long, omega_dot):
+        if self._deceleration_unexplained(t_c, braking or driving, accel_long_raw - self._sensor_offset_mps2, omega_dot,
+                                          max(wheel_linear)):
             return FrontEndResult(None, stale, "brake pressure implausible")
         speed, from_ref = self._speed_and_offset(t_c, wheel_linear, omega_dot, accel_long, accel_long_raw,
                                                  braking or driving)
@@ -99,7 +102,8 @@ class SamplePhysics:
         if yaw_rate is None or not math.isfinite(yaw_rate):
             yaw_rate = accel_lat / speed if speed > opts.min_speed else 0.0
 
-        loads = veh.normal_forces(accel_long, accel_lat)
+        # (the contact forces' acceleration: on a grade gravity shifts no load)
+        loads = veh.normal_forces(accel_long_raw - self._sensor_offset_mps2, accel_lat)
         forces = self._tyre_forces(t_c, omega_dot, glitch, pressures, accel_long_raw, speed, drive, wheel_linear,
                                    braking)
         mus = [force / load if load > MIN_LOAD_N else 0.0 for force, load in zip(forces, loads)]
@@ -134,14 +138,16 @@ class SamplePhysics:
                 drive[i] = v if v is not None and math.isfinite(v) else 0.0
         return drive
 
-    def _wheel_states(self, t_c: float, omega: list[float], accel_long_raw: float,
+    def _wheel_states(self, t_c: float, omega: list[float], accel_long: float,
                       pressures: list[float]) -> tuple[list[float], list[bool], list[bool], list[bool]]:
         """Each wheel's linear speed (a stuck or dead sensor's stood in for by the others), and
         which wheels are stuck, braked and dead."""
         opts = self.options
         veh = self.vehicle
         wheel_linear = [veh.wheel_radius * float(w) for w in omega]
-        stuck = [n >= opts.stuck_frames for n in self._repeats] if abs(accel_long_raw) > 0.5 else [False] * 4
+        # (repeated readings are a stuck sensor only while the car's speed changes: its acceleration
+        # is the accelerometer's less what free rolling taught, a car at rest on a hill reads gravity)
+        stuck = [n >= opts.stuck_frames for n in self._repeats] if abs(accel_long) > 0.5 else [False] * 4
         braked = [p - veh.brake_pushout_pressure > opts.min_brake_pressure for p in pressures]
         dead = self._dead_wheels(t_c, wheel_linear, braked)
         wheel_linear = stood_in_for([st or d for st, d in zip(stuck, dead)], wheel_linear)
@@ -160,7 +166,7 @@ class SamplePhysics:
         inertia_torques = [veh.wheel_inertia * float(a) for a in torque_omega_dot]
         if self.options.brake_gain_correction and not glitch:
             # The body's deceleration through the same filter as the torques it is compared with.
-            self._update_brake_gain(accel_long_matched - self._accel_bias_mps2,
+            self._update_brake_gain(accel_long_matched - self._sensor_offset_mps2,
                                     speed, inertia_torques, brake_torques, drive, wheel_linear, brake_rates, braking)
         gain = self._brake_gain_factor
         # A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ.
@@ -235,7 +241,7 @@ class SamplePhysics:
         v = sample.speed_mps
         # (the most resistance the car may meet: what it leaves is grip the tyres surely used)
         resistance = (veh.resistance_force(v) + veh.resistance_doubt_n(v)) / veh.mass
-        body = (-(accel - self._accel_bias_mps2) - resistance) / GRAVITY_MPS2
+        body = (-(accel - self._sensor_offset_mps2) - resistance - self._sensor_offset_doubt_mps2) / GRAVITY_MPS2
         # The same total from the wheels (brake torques, inertia): a bound must not rest on one
         # sensor alone. Beyond what brake-gain error explains, one of them is wrong: no bound.
         load = sum(sample.normal_force_n)

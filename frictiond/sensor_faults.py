@@ -39,15 +39,20 @@ class SensorFaults:
             spans.popleft()
         return any(a < time_s < b for a, b in spans)
 
-    def _deceleration_unexplained(self, t_c: float, torqued: bool, accel_long: float, omega_dot: list[float]) -> bool:
+    def _deceleration_unexplained(self, t_c: float, torqued: bool, accel_contact: float, omega_dot: list[float],
+                                  speed_mps: float) -> bool:
         """Plausibility of the brake pressures against the body: a hard deceleration for 0.1 s with
         no pressure anywhere (and no drive torque to explain it) means the pressure signals are
         wrong, and every brake torque computed from them would be too. Unless the wheels are
         spinning back up: an ABS that released every wheel from deep slip at once leaves the
-        road's force on them, J·ω̇/R each, braking the car for a few tenths of a second."""
+        road's force on them, J·ω̇/R each, braking the car for a few tenths of a second.
+        `accel_contact` is the contact and air forces' (the accelerometer less its own offset):
+        a car coasting up a hill slows by gravity, which no brake explains either, and at
+        motorway speed by drag, up to what the config's drag may be off by."""
         veh = self.vehicle
         spin_up = veh.wheel_inertia * sum(a for a in omega_dot if a > 0.0) / (veh.wheel_radius * veh.mass)
-        if not torqued and accel_long + spin_up < -self.options.unexplained_decel:
+        air = (veh.resistance_force(speed_mps) + veh.resistance_doubt_n(speed_mps)) / veh.mass
+        if not torqued and accel_contact + spin_up + air < -self.options.unexplained_decel:
             self._unexplained_s += max(0.0, t_c - self._last_sample_time_s) if self._last_sample_time_s else 0.0
         else:
             self._unexplained_s = 0.0

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import dataclasses
+
 import copy
 import importlib.util
 import sys
@@ -27,6 +29,13 @@ def load_benchmark(name: str) -> ModuleType:
 @pytest.fixture(scope="session")
 def default_config():
     return load_config(default_config_path())
+
+
+@pytest.fixture(scope="session")
+def level_config(default_config):
+    """The default config told that the roads are level (`FrontEndOptions.level_road`), as the
+    built-in simulator's are: free rolling then teaches the accelerometer's own offset."""
+    return dataclasses.replace(default_config, frontend=dataclasses.replace(default_config.frontend, level_road=True))
 
 
 @pytest.fixture

@@ -39,7 +39,8 @@ def campaign_stop_estimates(seed, relaxation_compensation=True, family=None, **l
     `lugre_options` replacing `LugreTROptions` fields) through the replay pipeline: (the simulated
     stop, lugre-tr's estimates). In still air, with the four wheel speeds in one message and the
     cycle times in the DBC, as the stops these tests tell of were found (the campaign's wind,
-    split wheel messages and DBCs without cycle times came later)."""
+    split wheel messages and DBCs without cycle times came later), on level ground with the front
+    end told so (`level_road`: the campaign's grades came later too)."""
     from dataclasses import replace
 
     from frictiond.campaign.draw import draw_stop
@@ -47,10 +48,11 @@ def campaign_stop_estimates(seed, relaxation_compensation=True, family=None, **l
     from frictiond.replay import estimates_of
 
     spec = draw_stop(seed, family)
-    stop = simulate_stop(replace(spec, wind_mps=0.0, sensors=replace(spec.sensors, wheel_messages="one",
-                                                                     cycle_times_in_dbc=True)))
+    stop = simulate_stop(replace(spec, wind_mps=0.0, grade=0.0, sensors=replace(spec.sensors, wheel_messages="one",
+                                                                                cycle_times_in_dbc=True)))
     config = stop.config("lugre-tr")
-    config = replace(config, frontend=replace(config.frontend, relaxation_compensation=relaxation_compensation),
+    config = replace(config, frontend=replace(config.frontend, relaxation_compensation=relaxation_compensation,
+                                              level_road=True),
                      estimator=replace(config.estimator, lugre_tr=replace(config.estimator.lugre_tr, **lugre_options)))
     _pipeline, estimates = estimates_of(config, stop.frames)
     return stop, estimates
@@ -876,11 +878,12 @@ def test_a_peak_swept_within_the_derivative_filter_costs_confidence():
     from frictiond.config import parse_config
     from frictiond.replay import estimates_of
 
-    stop = simulate_stop(draw_stop(2730))
+    stop = simulate_stop(dataclasses.replace(draw_stop(2730), grade=0.0))   # (level, as it was found)
     times = np.array([r["time_s"] for r in stop.truth])
 
     def valid_errors(weight: float) -> list[float]:
         data = stop.config_data()
+        data["frontend"] = {"level_road": True}
         # (at the VALID thresholds of then, 0.55 and 0.5, where the premise shows)
         data["estimator"]["lugre_tr"] = {"spread_loss_weight": weight, "valid_confidence": 0.55,
                                          "keep_valid_confidence": 0.5}

@@ -6,6 +6,7 @@ are judged as a receiver sees them, decoded off the bus.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -270,8 +271,12 @@ def test_flood_cpu_is_bounded_by_the_guard(default_config):
     assert guarded < 3.0 * normal * max(1.0, triggers_in / triggers_normal) + 0.5
 
 
-def test_long_stop_with_many_faults(default_config):
-    """One long stop (snow, 8 s) with faults one after another, then recovery."""
+@pytest.mark.parametrize("level", [True, False])
+def test_long_stop_with_many_faults(default_config, level_config, level):
+    """One long stop (snow, 8 s) with faults one after another, then recovery: VALID again where
+    the front end knows the road is level (on snow the accelerometer's offset is otherwise a tenth
+    of the brakes' torque it cannot tell from their gain, and the estimate stays CONVERGING)."""
+    default_config = level_config if level else default_config
     frames, sim = simulate_frames(default_config, "snow", seed=3)
     codec = Pipeline(default_config).input_codec
     damaged = faults.drop_message(frames, 0x0D0, 1.0, 1.5)
@@ -293,24 +298,32 @@ def test_long_stop_with_many_faults(default_config):
     tail = [e.status for e in estimates if e.time_s < 0 and unshift(e.time_s) > 6.5]
     # (a third of it: after the clock step the window restarts, and its confidence regains
     # VALID's threshold a second later)
-    assert tail and tail.count(Status.VALID) > 0.25 * len(tail)
+    assert tail and (tail.count(Status.VALID) > 0.25 * len(tail) or not level)
 
 
+@pytest.mark.parametrize("level", [True, False])
 @pytest.mark.parametrize("factor", [0.5, 2.5])
 @pytest.mark.parametrize("scenario", ["dry", "snow", "ice"])
-def test_brake_pressures_off_by_a_factor_are_a_fault_not_an_estimate(default_config, scenario, factor):
+def test_brake_pressures_off_by_a_factor_are_a_fault_not_an_estimate(default_config, level_config, scenario, factor,
+                                                                     level):
     # The brake-gain check cannot absorb a factor of 2: the body equation disagrees with the
     # pressures for most of the braking, which must show as FAULT, never as a VALID μ. Except
     # halved pressures on ice: at 0.4 m/s² the brakes give ~160 N·m, and the gain limits with
     # the accelerometer's and the pressures' offsets and a 5 m/s wind's drag explain up to about
     # a factor of 2 there. The disagreement is seen only while the ABS's cycles carry it further
-    # out, too briefly for a FAULT, and the estimate stays short of VALID.
+    # out, too briefly for a FAULT, and the estimate stays short of VALID. Where the roads are not
+    # known to be level, an accelerometer offset within the sensor's tolerance (0.3 m/s²) is not
+    # known either, and on snow and ice that explains the factor too: no FAULT is owed there, but
+    # still no VALID.
+    default_config = level_config if level else default_config
     frames, sim = simulate_frames(default_config, scenario, seed=2)
     pipeline = Pipeline(default_config)
     _, estimates, bad = faults.replay_on_bus(default_config, faults.pressure_scaled(frames, pipeline.input_codec, factor),
                                              pipeline=pipeline)
     assert not bad
     assert not [e for e in estimates if e.status == Status.VALID]
+    if not level and scenario != "dry":
+        return
     least = 10 if (scenario, factor) == ("ice", 0.5) else 100
     assert pipeline.stats.faults["brake pressure disagrees with deceleration"] > least
     if (scenario, factor) != ("ice", 0.5):
@@ -326,9 +339,11 @@ def test_a_head_wind_on_ice_is_weather_not_a_pressure_fault():
     from frictiond.campaign.draw import draw_stop
     from frictiond.campaign.simulate import simulate_stop
 
-    spec = draw_stop(360, None, clean_sensors=True)
+    # (on level ground, with the front end told so, as it was found: the grades came later)
+    spec = dataclasses.replace(draw_stop(360, None, clean_sensors=True), grade=0.0)
     assert spec.wind_mps > 4.5 and spec.surfaces[-1].label == "ice"
     stop = simulate_stop(spec)
-    pipeline = Pipeline(stop.config("lugre-tr"))
+    config = stop.config("lugre-tr")
+    pipeline = Pipeline(dataclasses.replace(config, frontend=dataclasses.replace(config.frontend, level_road=True)))
     statuses = [pipeline.last_estimate.status for frame in stop.frames if pipeline.process(frame)]
     assert Status.FAULT not in statuses and statuses.count(Status.VALID) > 300

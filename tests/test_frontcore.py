@@ -234,7 +234,8 @@ def test_history_push_is_the_same_on_both_paths():
 # The state `_frontcore.sample_physics` carries between samples (on the FrontEnd's attributes).
 PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_sample_time_s", "_accel_bias_mps2",
                  "_accel_bias_samples", "_accel_bias_m2", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
-                 "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",
+                 "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_gain_sum_w",
+                 "_sensor_offset_mps2", "_sensor_offset_doubt_mps2", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_gain_doubt", "_brake_model_holds",
                  "_unjudged_s", "_lag_state", "_slipping_time_s")
 
@@ -282,8 +283,8 @@ def _physics_stream(seed: int, steps: int):
 
 
 @needs_core
-@pytest.mark.parametrize("seed", [11, 12])
-def test_sample_physics_is_compute_sample_on_every_branch(seed):
+@pytest.mark.parametrize(("seed", "level_road"), [(11, False), (12, False), (13, True)])
+def test_sample_physics_is_compute_sample_on_every_branch(seed, level_road):
     from frictiond.frontend import DRIVE_TORQUE_NAMES, PRESSURE_NAMES, WHEEL_SPEED_NAMES, FrontEnd, FrontEndOptions
     from frictiond.vehicle import VehicleParams
 
@@ -292,7 +293,7 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed):
     vehicle = VehicleParams(brake_pushout_pressure=0.3, rolling_resistance=5.0)
 
     def make() -> FrontEnd:
-        fe = FrontEnd(vehicle, FrontEndOptions(), messages, {m: 0.01 for m in messages}, "WHEELS")
+        fe = FrontEnd(vehicle, FrontEndOptions(level_road=level_road), messages, {m: 0.01 for m in messages}, "WHEELS")
         # The input gate (plausibility.py) would keep the out-of-range values away from the
         # physics; its branches for them stay as a second line and are compared here too.
         fe.gate.admit = lambda *args: None

@@ -8,7 +8,8 @@ import random
 
 import pytest
 
-from frictiond.body_equation import ACCEL_BIAS_LEARNT_SAMPLES, gain_within_offset_ambiguity, offset_doubt_mps2
+from frictiond.body_equation import (ACCEL_BIAS_LEARNT_SAMPLES, UNLEARNT_ACCEL_TOLERANCE_MPS2, gain_and_sensor_offset,
+                                     gain_within_offset_ambiguity, offset_doubt_mps2)
 from frictiond.frontend import (
     DRIVE_TORQUE_NAMES,
     PRESSURE_NAMES,
@@ -543,20 +544,27 @@ class CyclingPressureDrive(Drive):
 def test_pressures_lagging_an_abs_cycle_are_no_fault_but_a_factor_is(compiled):
     # On ice the brake torques are of the order of the wheels' inertia torques, and a lagging
     # sensor reads ±60 % off through each cycle: sample by sample the pressures "disagree",
-    # over the cycles they do not. Steady pressures off by a factor of 2.5 do, once the car has
-    # rolled long enough to learn its accelerometer's offset (before that, 0.3 m/s² of possible
-    # offset on a 1 m/s² stop and the gain limits together explain a factor of 2).
-    drive = CyclingPressureDrive(0.6, v0=20.0, decel=1.0, slip=0.03)
-    drive.pressure = _needed_pressure(1.0, 0.03, 19.0)
-    fe = make()
-    if not compiled:
-        fe.core = None
-    results = feed(fe, drive, duration=1.5)
-    assert len(results) > 100 and all(r.fault is None for r in results)
-    fe.reset()
-    too_high = 2.5 * _needed_pressure(1.0, 0.03, 19.0)
-    results = feed_phases(fe, [(0.7, lambda t: 0.05, lambda t: 0.0), (1.5, lambda t: 1.0, lambda t: too_high)])
-    assert _disagreements(results, 0.7) > 100
+    # over the cycles they do not. Steady pressures off by a factor of 2.5 do, on level ground once
+    # the car has rolled long enough to learn its accelerometer's offset. Elsewhere free rolling
+    # teaches a grade with the offset, and an offset within the sensor's tolerance, 0.3 m/s² on a
+    # 1 m/s² stop, with the gain at its limit nearly explains it: a fault or not, no gain within
+    # its limits fits, and the gain is doubted by all of them.
+    for level in (True, False):
+        drive = CyclingPressureDrive(0.6, v0=20.0, decel=1.0, slip=0.03)
+        drive.pressure = _needed_pressure(1.0, 0.03, 19.0)
+        fe = make(FrontEndOptions(level_road=level))
+        if not compiled:
+            fe.core = None
+        results = feed(fe, drive, duration=1.5)
+        assert len(results) > 100 and all(r.fault is None for r in results)
+        fe.reset()
+        too_high = 2.5 * _needed_pressure(1.0, 0.03, 19.0)
+        results = feed_phases(fe, [(0.7, lambda t: 0.05, lambda t: 0.0), (1.5, lambda t: 1.0, lambda t: too_high)])
+        if level:
+            assert _disagreements(results, 0.7) > 100
+        else:
+            braked = [r.sample for t, r in results if t > 1.0 and r.sample is not None]
+            assert braked and all(s.brake_gain_doubt >= 0.25 for s in braked)
 
 
 @pytest.mark.parametrize("compiled", [True, False])
@@ -582,11 +590,13 @@ def test_master_pressure_says_nothing_for_the_rest_of_a_stop_once_an_abs_release
 
 
 def feed_phases(fe: FrontEnd, phases, slip: float = 0.03, pressure_lag: float = 0.0,
-                accel_offset: float = 0.0, start_speed: float = 30.0) -> list:
+                accel_offset: float = 0.0, start_speed: float = 30.0, gravity_along: float = 0.0) -> list:
     """Straight-line driving through `phases`, each (duration, deceleration(t in phase), the brake
     pressure the sensors read(t in phase)); the speed and wheel speeds integrate the deceleration,
     so the phases join smoothly. The pressure sensors read their value `pressure_lag` late, the
-    accelerometer `accel_offset` above the car's acceleration. Returns (time, result) pairs."""
+    accelerometer `accel_offset` above the car's acceleration. On a grade (`gravity_along`, g·sin θ,
+    uphill positive) the car slows by that much more than its contact forces say, which is what
+    the accelerometer reads. Returns (time, result) pairs."""
     dt, t, v = 0.01, 0.0, start_speed
     schedule, start = [], 0.0
     for duration, decel, pressure in phases:
@@ -611,7 +621,7 @@ def feed_phases(fe: FrontEnd, phases, slip: float = 0.03, pressure_lag: float = 
             r = fe.push(t, name, values)
             if r is not None:
                 out.append((t, r))
-        v -= a * dt
+        v -= (a + gravity_along) * dt
         t = round(t + dt, 6)
     return out
 
@@ -687,7 +697,8 @@ def test_the_top_of_an_abs_cycle_is_measured_not_averaged_away(monkeypatch, whee
     from frictiond.replay import estimates_of
 
     spec = draw_stop(2294)
-    spec = dataclasses.replace(spec, sensors=dataclasses.replace(spec.sensors, wheel_hz=wheel_hz))
+    # (on level ground, with the front end told so, as it was found: the grades came later)
+    spec = dataclasses.replace(spec, grade=0.0, sensors=dataclasses.replace(spec.sensors, wheel_hz=wheel_hz))
     stop = simulate_stop(spec)
     samples = []
     push = FrontEnd.push
@@ -699,7 +710,8 @@ def test_the_top_of_an_abs_cycle_is_measured_not_averaged_away(monkeypatch, whee
         return result
 
     monkeypatch.setattr(FrontEnd, "push", recording_push)
-    estimates_of(stop.config("lugre-tr"), stop.frames)
+    config = stop.config("lugre-tr")
+    estimates_of(dataclasses.replace(config, frontend=dataclasses.replace(config.frontend, level_road=True)), stop.frames)
     truth = stop.truth
     times = [row["time_s"] for row in truth]
     errors = []
@@ -896,27 +908,82 @@ def test_the_gain_is_the_middle_of_what_the_limits_and_an_unlearnt_offset_allow(
     assert gain_within_offset_ambiguity(1.15, 0.25, 0.01) == pytest.approx((1.15, 0.01))  # well resolved
 
 
+def test_the_gain_and_the_accelerometer_offset_are_told_apart_only_by_a_varying_torque():
+    mass_radius = VEH.mass * VEH.wheel_radius
+    prior = 1e7                                                    # (the gain's prior: 10 samples at 1 kN·m)
+    assert gain_and_sensor_offset(prior, prior, 0.0, 0.0, 0.0, 20.0, mass_radius) == (1.0, 0.0, 0.3)
+
+    def fit(torques):
+        needed = [1.1 * b - mass_radius * 0.2 for b in torques]    # brakes 10 % strong, offset 0.2 m/s²
+        sums = (sum(b * b for b in torques), sum(b * n for b, n in zip(torques, needed)),
+                sum(torques), sum(needed), float(len(torques)))
+        return gain_and_sensor_offset(*sums, 20.0, mass_radius)
+
+    cycling = fit([600.0 + 400.0 * math.sin(0.3 * k) for k in range(3000)])
+    assert cycling[0] == pytest.approx(1.1, abs=0.01) and cycling[1] == pytest.approx(0.2, abs=0.02)
+    assert cycling[2] < 0.1
+    # A steady torque: an offset and a gain fit it alike; the prior keeps the offset near none,
+    # the gain takes the rest, and the doubt stays near the sensor's tolerance.
+    steady = fit([600.0] * 3000)
+    assert abs(steady[1]) < 0.05 and steady[0] == pytest.approx(1.1 - mass_radius * 0.2 / 600.0, abs=0.02)
+    assert steady[2] > 0.25
+
+
 @pytest.mark.parametrize("compiled", [True, False])
-@pytest.mark.parametrize("free_rolling_s", [0.0, 1.2])
-def test_an_accelerometer_offset_not_yet_learnt_is_not_taken_for_strong_brakes(compiled, free_rolling_s):
-    # Snow: the car slows by 1.2 m/s² on brakes exactly as configured, and the accelerometer reads
-    # 0.25 m/s² more. Braking right after start-up, the body equation cannot tell the offset from
-    # brakes 20 % too strong: the gain stays near the middle of what the limits allow, and says so.
-    # After free rolling has taught the offset, the same stop's gain is learnt as it is, without doubt.
-    fe = _front_end(compiled)
+@pytest.mark.parametrize(("free_rolling_s", "gravity_along"), [(0.0, 0.0), (1.2, 0.0), (1.2, 0.8), (1.2, -0.8)])
+def test_an_accelerometer_offset_or_a_grade_is_not_taken_for_strong_brakes(compiled, free_rolling_s, gravity_along):
+    # Snow: brakes exactly as configured slow the car by 1.2 m/s² of tyre force, and the
+    # accelerometer reads 0.25 m/s² more; on a grade of 8 % gravity slows the car by 0.8 m/s² more
+    # (or less), which free rolling teaches as part of the "offset" while the brakes feel none of
+    # it. A steady pedal cannot tell the accelerometer's offset from brakes 20 % too strong: the
+    # gain stays within what an offset within the sensor's tolerance allows, and says so,
+    # whatever came before.
     needed = _needed_pressure(1.2, 0.03, 25.0)
     rolling = [(free_rolling_s, lambda t: 0.0, lambda t: 0.0)] if free_rolling_s else []
-    results = feed_phases(fe, rolling + [(2.0, lambda t: 1.2, lambda t: needed)], accel_offset=-0.25)
+    # (the gain of this drive, as a front end that knows its offset and the road's level learns it:
+    # the drive's pressure is set for 25 m/s and level ground, its wheels' inertia torque as there)
+    informed = make(FrontEndOptions(level_road=True))
+    feed_phases(informed, [(1.2, lambda t: 0.0, lambda t: 0.0), (2.0, lambda t: 1.2, lambda t: needed)])
+    fe = _front_end(compiled)
+    results = feed_phases(fe, rolling + [(2.0, lambda t: 1.2, lambda t: needed)], accel_offset=-0.25,
+                          gravity_along=gravity_along)
     samples = [r.sample for t, r in results if r.sample is not None and r.sample.braking and t > free_rolling_s + 1.0]
     assert samples and _disagreements(results, 0.0) == 0
+    # (learnt from the body with the offset free rolling taught, it heads for (1.2 ± 0.8) / 1.2;
+    # the informed gain is within what the gain says it may be off by)
+    assert informed.brake_gain_factor == pytest.approx(1.0, abs=0.05)
+    assert all(0.1 < s.brake_gain_doubt <= 0.25 for s in samples)
+    assert abs(fe.brake_gain_factor - informed.brake_gain_factor) <= samples[-1].brake_gain_doubt
     if free_rolling_s > 1.0:
-        assert fe.brake_gain_factor == pytest.approx(1.0, abs=0.05)   # (the pressure is set for 25 m/s)
-        assert all(s.brake_gain_doubt == 0.0 == s.accel_offset_doubt_mps2 for s in samples)
-    else:
-        # (learnt from the body alone it heads for (1.2 + 0.25) / 1.2 = 1.21: 1.18 by now)
-        assert abs(fe.brake_gain_factor - 1.0) < 0.1
-        assert all(0.1 < s.brake_gain_doubt <= 0.25 for s in samples)
-        assert all(s.accel_offset_doubt_mps2 == pytest.approx(0.3 / math.sqrt(3.0)) for s in samples)
+        # (the speed estimate takes off what free rolling taught: the offset and gravity's share)
+        assert fe.accel_bias_mps2 == pytest.approx(-0.25 + gravity_along, abs=0.03)
+        assert all(s.accel_offset_doubt_mps2 == 0.0 for s in samples)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_torque_cycling_under_abs_tells_the_accelerometer_offset_on_a_grade(compiled):
+    # The same snow stop downhill, with the torque steady or cycling as an ABS works it: only the
+    # cycling tells the accelerometer's offset (the body equation's intercept: the offset, not
+    # gravity's share) from the gain, and its doubt shrinks. The prior and the gain's forgetting
+    # (2 s) keep it from much more than half the offset within 3 s; the gain's doubt holds the rest.
+    def run(amplitude: float) -> FrontEnd:
+        fe = _front_end(compiled)
+
+        def decel(t: float) -> float:
+            return 1.2 + amplitude * math.sin(2.0 * math.pi * 3.0 * t)
+
+        results = feed_phases(fe, [(1.2, lambda t: 0.0, lambda t: 0.0),
+                                   (3.0, decel, lambda t: _needed_pressure(decel(t), 0.03, 25.0))],
+                              accel_offset=-0.25, gravity_along=-0.6)
+        assert _disagreements(results, 0.0) == 0
+        return fe
+
+    steady, cycling = run(0.0), run(0.6)
+    assert abs(steady._sensor_offset_mps2) < 0.1    # (what the pedal's step shows of it)
+    assert -0.25 - 0.05 < cycling._sensor_offset_mps2 < -0.1
+    assert cycling._sensor_offset_doubt_mps2 < 0.8 * steady._sensor_offset_doubt_mps2
+    # (the brakes' true gain, 1, within what the gain says it may be off by)
+    assert abs(cycling.brake_gain_factor - 1.0) <= cycling.brake_gain_doubt + 0.02 < 0.2
 
 
 @pytest.mark.parametrize("compiled", [True, False])
@@ -939,18 +1006,20 @@ def test_the_air_drag_a_wind_may_change_is_doubted_in_the_gain_and_the_grip_the_
     calm_fe, calm = run(VEH)
     windy_fe, windy = run(windy_car)
     assert calm and len(windy) == len(calm)
-    assert all(s.brake_gain_doubt == 0.0 for s in calm) and calm_fe.resistance_doubt_share == 0.0
+    assert calm_fe.resistance_doubt_share == 0.0
     speed = windy[-1].speed_mps
     doubt_n = VEH.drag_area_coefficient * ((speed + 5.0) ** 2 - speed**2)
     tyres_n = sum(windy[-1].tyre_force_n)
     assert windy_fe.resistance_doubt_share == pytest.approx(doubt_n / tyres_n, rel=0.05)
-    assert 0.07 < windy[-1].brake_gain_doubt < 0.12
-    # (the body's deceleration, 1 m/s², less the most drag the wind allows, over g; the wheels' own
-    # sum, which the calm car's body_mu takes where it is smaller, is now larger)
-    most_drag = [(1.0 - (windy_car.resistance_force(w.speed_mps) + windy_car.resistance_doubt_n(w.speed_mps))
-                  / windy_car.mass) / GRAVITY_MPS2 for w in windy]
-    assert all(w.body_mu == pytest.approx(m, abs=1e-3) for w, m in zip(windy, most_drag))
-    assert all(c.body_mu - w.body_mu > 0.004 for c, w in zip(calm, windy))   # (0.009 at most)
+    # (on top of what the accelerometer's offset leaves, the same in both: the two in quadrature)
+    assert windy[-1].brake_gain_doubt == pytest.approx(
+        math.hypot(calm[-1].brake_gain_doubt, windy_fe.resistance_doubt_share), rel=0.02)
+    assert windy[-1].brake_gain_doubt - calm[-1].brake_gain_doubt > 0.02
+    # (the body's deceleration less the most drag the wind allows: lower by up to that drag over
+    # the car's weight, 0.009 at most)
+    for c, w in zip(calm, windy):
+        most = windy_car.resistance_doubt_n(w.speed_mps) / (windy_car.mass * GRAVITY_MPS2)
+        assert 0.004 < c.body_mu - w.body_mu <= most + 1e-3
 
 
 @pytest.mark.parametrize("compiled", [True, False])

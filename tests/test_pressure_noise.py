@@ -177,9 +177,11 @@ def test_replay_says_when_the_pressure_sensors_were_too_noisy_for_the_usual_thre
 def test_a_stop_without_abs_read_through_noisy_pressure_sensors_is_not_taken_for_one_at_the_limit():
     # Campaign stop 65 (no ABS, moderate braking) with 1.2 bar of pressure noise, twice the
     # campaign's most: with the release threshold held at 5 bar its noise reads as ABS releases
-    # and every VALID output is more than 20 % off; with the noise measured, none is VALID.
+    # and every VALID output is more than 20 % off; with the noise measured, none is VALID. (On
+    # level ground with the front end told so, as it was found: where the road may have a grade
+    # the accelerometer's offset keeps the snow's gain in doubt, and neither variant is VALID.)
     bench = load_benchmark("pressure_noise")
-    seed, family, valid, false, measured_share = bench.run_stop(65, 1.2, "measured")
+    seed, family, valid, false, measured_share = bench.run_stop(65, 1.2, "measured", level=True)
     assert family == "d-none" and valid == 0 and 0.8 < measured_share < 1.5
-    _, _, valid_fixed, false_fixed, _ = bench.run_stop(65, 1.2, "fixed 5 bar")
+    _, _, valid_fixed, false_fixed, _ = bench.run_stop(65, 1.2, "fixed 5 bar", level=True)
     assert valid_fixed > 100 and false_fixed == valid_fixed

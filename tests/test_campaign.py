@@ -64,6 +64,8 @@ def test_draws_stay_in_their_documented_ranges():
         assert s.sensors.wheel_hz in (50, 83, 100) and 0.01 <= s.sensors.wheel_resolution_kmh <= 0.0625
         assert 0.85 <= s.lateral_capacity <= 1.10
         assert -5.0 <= s.wind_mps <= 5.0
+        # (a grade the brakes can hold the car on: at most half the lowest peak)
+        assert abs(s.grade) <= min(0.08, 0.5 * min(draw_mod._peak_mu(c, s.speed0_mps) for c in s.surfaces)) + 1e-12
         for curve in s.surfaces:
             assert curve.kind in ("burckhardt", "magic-formula")   # never LuGre
             if curve.kind == "magic-formula":
@@ -83,6 +85,9 @@ def test_draws_stay_in_their_documented_ranges():
     assert min(slopes) < -0.1 and max(slopes) > 0.1      # speed dependence of either sign
     gains = [s.car.brake_gain_front / s.car.config_brake_gain_front for s in specs]
     assert min(gains) < 0.85 and max(gains) > 1.15
+    grades = [s.grade for s in specs]
+    assert 0.25 < sum(g == 0.0 for g in grades) / len(grades) < 0.42        # a third on the flat
+    assert min(grades) < -0.06 and max(grades) > 0.06                       # up and down, steep
 
 
 def test_the_truth_shares_no_code_with_the_estimator():
@@ -301,6 +306,12 @@ def test_a_small_campaign_runs_end_to_end_and_reports(tmp_path):
     assert sum(v for k, v in counts.items() if k.startswith("wheel_hz=")) == 6
     # (the tyre's relaxation: a long one smooths the force over an ABS cycle)
     assert (counts["relaxation=none"], counts["relaxation=<0.3m"], counts["relaxation=>=0.3m"]) == (3, 1, 2)
+    # (the road's grade, up or down, gentle or steep)
+    graded = [dict(r, grade=(0.0, 0.0, 0.03, 0.05, -0.01, -0.08)[i]) for i, r in enumerate(rows)]
+    grade_counts = {line[:38].strip(): int(line[38:44]) for line in format_families(graded).splitlines()
+                    if line.startswith("grade=")}
+    assert grade_counts == {"grade=flat": 2, "grade=up <4%": 1, "grade=up >=4%": 1, "grade=down <4%": 1,
+                            "grade=down >=4%": 1}
     names = [t[0] for t in target_rows(rows, "lugre")]
     assert len(names) == 14 and names[-1].endswith("0.9")
     path = tmp_path / "rows.json"

@@ -47,6 +47,11 @@ releases 0.8–2.0 s into the stop for 0.3–0.8 s and brakes again)
   by the friction ellipse, lateral grip 0.85–1.10 × the longitudinal (see simulate.py)
 - wind along the road ± 0–5 m/s (a head wind positive): the air drag is ½ρC_dA·(v + w)|v + w|,
   while the car's config gives ½ρC_dA alone, as a user knows it
+- the road's grade: flat for a third of the stops, else uphill or downhill 0–8 % (rise over run;
+  at most half the lowest peak μ, so that the brakes can stop and hold the car).
+  The accelerometer reads the contact and air forces, so on a grade it differs from the wheels'
+  deceleration by gravity's share, and free rolling teaches the front end that share together
+  with the sensor's offset
 - initial speed 20–160 km/h; 0.8–1.2 s of free rolling first (`pre_roll_s` sets it: the front end
   learns the accelerometer's offset while rolling free); braking for at most 8 s (14 s
   without ABS; then the driver releases), 0.3 s recorded after standstill, 0.5 s after a release
@@ -82,6 +87,8 @@ WHEEL_RATES_HZ = (50, 83, 100)
 WHEEL_RESOLUTIONS_KMH = (0.01, 0.015625, 0.02, 0.03125, 0.05, 0.0625)
 JUMPS = ("dry-wet", "wet-dry", "to-ice")
 D_MIN_PEAK = 0.15
+GRADED_SHARE = 2.0 / 3.0     # of the stops on a grade (the rest on the flat)
+MAX_GRADE = 0.08             # rise over run, either way: a steep main road
 
 
 @dataclass(frozen=True)
@@ -362,4 +369,7 @@ def _draw_drive(rng: np.random.Generator, spec: StopSpec) -> StopSpec:
     # (drawn last, and for every stop: the draws above stay what each seed drew before)
     changes["lateral_capacity"] = rng.uniform(0.85, 1.10)
     changes["wind_mps"] = rng.uniform(-5.0, 5.0)
+    # (a road steeper than half its grip allows is one no car stops on: a stop must end)
+    graded, grade = rng.random() < GRADED_SHARE, rng.uniform(-1.0, 1.0) * min(MAX_GRADE, 0.5 * mu_low)
+    changes["grade"] = grade if graded else 0.0
     return replace(spec, **changes)

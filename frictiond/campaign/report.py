@@ -158,6 +158,14 @@ def _surface_class(r: Row) -> str:
     return "|".join(s.replace("mf-", "").replace("_asphalt", "") for s in str(r["surfaces"]).split("|"))
 
 
+def _grade_class(grade: float) -> str:
+    """The road's grade in five classes: flat, up or down to 4 %, and steeper."""
+    if grade == 0.0:
+        return "flat"
+    way = "up" if grade > 0.0 else "down"
+    return f"{way} {'<4%' if abs(grade) < 0.04 else '>=4%'}"
+
+
 def _relaxation_class(r: Row) -> str:
     """The tyre's relaxation length in three classes: none, short, and long enough (0.3 m or more)
     that at town speeds its lag smooths the force over an ABS cycle."""
@@ -178,6 +186,7 @@ _FAMILY_GROUPS: dict[str, Callable[[Row], str]] = {
     "wheel_hz": lambda r: str(r.get("wheel_hz")),
     "wheel_messages": lambda r: str(r.get("wheel_messages", "one")),
     "cycle_times": lambda r: "in DBC" if r.get("cycle_times_in_dbc", True) else "measured",
+    "grade": lambda r: _grade_class(float(r.get("grade") or 0.0)),
 }
 
 

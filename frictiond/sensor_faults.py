@@ -46,9 +46,9 @@ class SensorFaults:
         wrong, and every brake torque computed from them would be too. Unless the wheels are
         spinning back up: an ABS that released every wheel from deep slip at once leaves the
         road's force on them, J·ω̇/R each, braking the car for a few tenths of a second.
-        `accel_contact` is the contact and air forces' (the accelerometer less its own offset):
-        a car coasting up a hill slows by gravity, which no brake explains either, and at
-        motorway speed by drag, up to what the config's drag may be off by."""
+        `accel_contact` is the contact and air forces' (the accelerometer less its own offset),
+        which does not hold the gravity slowing a car that coasts up a hill; the drag at the
+        car's speed, up to what the config's drag may be off by, is taken off it."""
         veh = self.vehicle
         spin_up = veh.wheel_inertia * sum(a for a in omega_dot if a > 0.0) / (veh.wheel_radius * veh.mass)
         air = (veh.resistance_force(speed_mps) + veh.resistance_doubt_n(speed_mps)) / veh.mass

@@ -452,3 +452,14 @@ def test_a_stop_braked_soon_after_the_start_is_the_same_stop_braked_earlier():
     with pytest.raises(ValueError, match="pre_roll_s"):
         draw_stop(3, pre_roll_s=-1.0)
     assert " --pre-roll 0.1 " in reproduce_command({"seed": 3}, None, pre_roll_s=0.1)
+
+
+def test_a_stop_set_on_a_grade_is_the_same_stop_on_that_grade():
+    spec = draw_stop(3)
+    graded = draw_stop(3, grade=-0.05)
+    assert dataclasses.replace(spec, grade=-0.05) == graded
+    with pytest.raises(ValueError, match="grade"):
+        draw_stop(3, grade=0.5)
+    assert " --grade -0.05 " in reproduce_command({"seed": 3}, None, grade=-0.05)
+    rows = run_campaign([3], workers=0, grade=0.04)
+    assert rows[0]["grade"] == 0.04 and not rows[0].get("sim_error")

@@ -89,6 +89,7 @@ JUMPS = ("dry-wet", "wet-dry", "to-ice")
 D_MIN_PEAK = 0.15
 GRADED_SHARE = 2.0 / 3.0     # of the stops on a grade (the rest on the flat)
 MAX_GRADE = 0.08             # rise over run, either way: a steep main road
+MAX_GRADE_SET = 0.3          # ... and what a stress run may set (`draw_stop`'s `grade`)
 
 
 @dataclass(frozen=True)
@@ -302,11 +303,14 @@ def _apply_family(choices: list[str], family: str | None) -> list[str]:
 
 
 def draw_stop(seed: int, family: str | None = None, clean_sensors: bool = False,
-              pre_roll_s: float | None = None) -> StopSpec:
+              pre_roll_s: float | None = None, grade: float | None = None) -> StopSpec:
     """The stop of `seed`. `family`: "ABS[/TYRE[/MANOEUVRE]]", each part a prefix of one of
     `ABS_FAMILIES`, `TYRE_FAMILIES`, `MANOEUVRES` or "*" (e.g. "c", "a/magic", "*/*/split").
     `clean_sensors`: the same stop with its sensors' imperfections taken off (`clean`).
-    `pre_roll_s`: the same stop braked this soon after the start (`with_pre_roll`)."""
+    `pre_roll_s`: the same stop braked this soon after the start (`with_pre_roll`).
+    `grade`: the same stop on this grade (rise over run, uphill positive) in place of the drawn."""
+    if grade is not None and not abs(grade) <= MAX_GRADE_SET:
+        raise ValueError(f"grade must be within ±{MAX_GRADE_SET}, not {grade}")
     streams = [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(6)]
     pick, car_rng, tyre_rng, abs_rng, sensor_rng, drive_rng = streams
     choices = [_pick(pick, ABS_FAMILIES, (27, 27, 27, 19)), _pick(pick, TYRE_FAMILIES, (1, 1)),
@@ -327,6 +331,8 @@ def draw_stop(seed: int, family: str | None = None, clean_sensors: bool = False,
         seed=int(seed), abs_family=abs_family, tyre_family=tyre_family, manoeuvre=manoeuvre, car=car,
         surfaces=surfaces, relaxation_m=relaxation, sensors=sensors, abs_params=abs_params,
         abs_cycle_s=abs_cycle, abs_cutout_mps=cutout, jump_kind=jump_kind))
+    if grade is not None:
+        spec = replace(spec, grade=float(grade))
     return spec if pre_roll_s is None else with_pre_roll(spec, pre_roll_s)
 
 

@@ -265,21 +265,23 @@ def format_not_valid(rows: Sequence[Row], p: str = "lugre", top: int = 4) -> str
 
 
 def reproduce_command(r: Row, family: str | None = None, clean_sensors: bool = False,
-                      pre_roll_s: float | None = None) -> str:
+                      pre_roll_s: float | None = None, grade: float | None = None) -> str:
     fam = f" --family {family}" if family else ""
     clean = " --clean-sensors" if clean_sensors else ""
     early = f" --pre-roll {pre_roll_s:g}" if pre_roll_s is not None else ""
-    return f"python benchmarks/campaign.py --reproduce {r['seed']}{fam}{clean}{early} --write-log /tmp/s{r['seed']}"
+    graded = f" --grade {grade:g}" if grade is not None else ""
+    return (f"python benchmarks/campaign.py --reproduce {r['seed']}{fam}{clean}{early}{graded} "
+            f"--write-log /tmp/s{r['seed']}")
 
 
 def format_worst(rows: Sequence[Row], n: int, family: str | None = None, p: str = "lugre",
-                 clean_sensors: bool = False, pre_roll_s: float | None = None) -> str:
+                 clean_sensors: bool = False, pre_roll_s: float | None = None, grade: float | None = None) -> str:
     ranked = sorted(usable(rows), key=lambda r: -badness(r, p))[:n]
     lines = [f"== worst {len(ranked)} stops for {ESTIMATORS[p]} =="]
     for r in ranked:
         lines.append(f"seed {r['seed']:>8d}  {r['family']:34s} {r['surfaces']:28s} {r['speed0_kmh']:5.0f} km/h  "
                      f"{reason(r, p)}")
-        lines.append(f"    {reproduce_command(r, family, clean_sensors, pre_roll_s)}")
+        lines.append(f"    {reproduce_command(r, family, clean_sensors, pre_roll_s, grade)}")
     errors = [r for r in rows if r.get("sim_error")]
     for r in errors[:n]:
         lines.append(f"seed {r['seed']:>8d}  generator error: {r['sim_error']}")
@@ -287,7 +289,8 @@ def format_worst(rows: Sequence[Row], n: int, family: str | None = None, p: str 
 
 
 def full_report(rows: Sequence[Row], title: str, worst: int = 15, family: str | None = None,
-                clean_sensors: bool = False, pre_roll_s: float | None = None) -> str:
+                clean_sensors: bool = False, pre_roll_s: float | None = None, grade: float | None = None) -> str:
     return "\n\n".join([format_targets(rows, title), format_comparison(rows), format_families(rows),
                         format_not_valid(rows), format_distributions(rows),
-                        format_worst(rows, worst, family, clean_sensors=clean_sensors, pre_roll_s=pre_roll_s)])
+                        format_worst(rows, worst, family, clean_sensors=clean_sensors, pre_roll_s=pre_roll_s,
+                                     grade=grade)])

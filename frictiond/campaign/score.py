@@ -137,10 +137,10 @@ def score_stop(stop: CampaignStop) -> dict[str, Any]:
 
 
 def run_seed(seed: int, family: str | None = None, clean_sensors: bool = False,
-             pre_roll_s: float | None = None) -> dict[str, Any]:
+             pre_roll_s: float | None = None, grade: float | None = None) -> dict[str, Any]:
     """Draw, simulate and score one seed (the unit of work a campaign worker runs)."""
     t0 = time.process_time()
-    spec = draw_stop(seed, family, clean_sensors, pre_roll_s)
+    spec = draw_stop(seed, family, clean_sensors, pre_roll_s, grade)
     try:
         stop = simulate_stop(spec)
     except Exception as exc:   # a generator bug must show as such, with its seed
@@ -153,7 +153,7 @@ def run_seed(seed: int, family: str | None = None, clean_sensors: bool = False,
 
 
 def run_seeds(seeds: Sequence[int], family: str | None = None, clean_sensors: bool = False,
-              pre_roll_s: float | None = None) -> list[dict[str, Any]]:
+              pre_roll_s: float | None = None, grade: float | None = None) -> list[dict[str, Any]]:
     """A chunk of seeds in one task (fewer, larger Dask tasks: the scheduler's cost per task
     is comparable to a short stop's)."""
-    return [run_seed(s, family, clean_sensors, pre_roll_s) for s in seeds]
+    return [run_seed(s, family, clean_sensors, pre_roll_s, grade) for s in seeds]

@@ -970,7 +970,7 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
     const double other = sum_of(inertia, NW) - sum_of(drive, NW);
     const double lim = k[K_GAIN_LIMITS];
     const double needed = total_force * k[K_RADIUS] - other;
-    double ratio = needed / total_brake;
+    const double ratio = needed / total_brake;
     if (!isfinite(ratio))
         return;
     const double recent = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / BRAKE_MODEL_WINDOW);
@@ -997,19 +997,17 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
         if (k[K_LAG_COMPENSATION] != 0.0)
             learn_pressure_lag(s, k, raw_brake, raw_rate, needed);
         /* (body_equation.BodyEquation._learn_brake_gain) */
-        const double mass_radius = k[K_MASS] * k[K_RADIUS], band = mass_radius * SENSOR_OFFSET_LIMIT;
+        const int level = k[K_LEVEL_ROAD] != 0.0;
+        const double mass_radius = k[K_MASS] * k[K_RADIUS], band = level ? 0.0 : mass_radius * SENSOR_OFFSET_LIMIT;
         const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_GAIN_TAU], 1e-3));
+        const double fitted = level ? needed : needed - mass_radius * s->sensor_offset;
+        const double n = py_min(py_max(fitted, (1.0 - lim) * total_brake - band), (1.0 + lim) * total_brake + band);
+        s->gain_tt = keep * s->gain_tt + total_brake * total_brake;
+        s->gain_tn = keep * s->gain_tn + total_brake * n;
         double gain;
-        if (k[K_LEVEL_ROAD] != 0.0) {
-            ratio = py_min(py_max(ratio, 1.0 - lim), 1.0 + lim);
-            s->gain_tt = keep * s->gain_tt + total_brake * total_brake;
-            s->gain_tn = keep * s->gain_tn + total_brake * total_brake * ratio;
+        if (level)
             gain = s->gain_tn / s->gain_tt;
-        } else {
-            const double raw = needed - mass_radius * s->sensor_offset;
-            const double n = py_min(py_max(raw, (1.0 - lim) * total_brake - band), (1.0 + lim) * total_brake + band);
-            s->gain_tt = keep * s->gain_tt + total_brake * total_brake;
-            s->gain_tn = keep * s->gain_tn + total_brake * n;
+        else {
             s->gain_t = keep * s->gain_t + total_brake;
             s->gain_n = keep * s->gain_n + n;
             s->gain_w = keep * s->gain_w + 1.0;
@@ -1021,7 +1019,7 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
         const double ambiguity = doubt > 0.0 && s->recent_brake > 0.0
             ? mass_radius * doubt / py_max(s->recent_brake / py_max(s->recent_weight, 1e-9), 1e-9)
             : 0.0;
-        if (k[K_LEVEL_ROAD] == 0.0 && !(1.0 - lim <= gain && gain <= 1.0 + lim)) {
+        if (!level && !(1.0 - lim <= gain && gain <= 1.0 + lim)) {
             s->gain_factor = py_min(py_max(gain, 1.0 - lim), 1.0 + lim);
             s->gain_doubt = lim;
         } else
@@ -1129,12 +1127,13 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     if (load_state(fe, &s) < 0)
         return NULL;
     const double radius = k[K_RADIUS];
+    const double accel_long = a_raw - s.bias;   /* (what the car's speed does: free rolling's offset) */
     double wl[NW];
     int stuck[NW], braked[NW], dead[NW], failed[NW];
     int any_failed = 0, all_failed = 1, braking = 0, driving = 0, any_stuck = 0;
     for (int i = 0; i < NW; i++) {
         wl[i] = radius * omega[i];
-        stuck[i] = fabs(a_raw - s.bias) > 0.5 ? (double)s.repeats[i] >= k[K_STUCK_FRAMES] : 0;
+        stuck[i] = fabs(accel_long) > 0.5 ? (double)s.repeats[i] >= k[K_STUCK_FRAMES] : 0;
         braked[i] = p[i] - k[K_PUSHOUT] > k[K_MIN_BRAKE_PRESSURE];
         braking |= braked[i];
         driving |= has_drive && fabs(drive[i]) > 20.0;
@@ -1161,21 +1160,23 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
             if (failed[i])
                 wl[i] = slowest_ok;
     }
-    const double accel_long = a_raw - s.bias;
     /* (wheels spinning back up after an ABS release explain the car's deceleration) */
     double spin_up = 0.0;
     for (int i = 0; i < NW; i++)
         if (omega_dot[i] > 0.0)
             spin_up += omega_dot[i];
     spin_up = k[K_INERTIA] * spin_up / (k[K_RADIUS] * k[K_MASS]);
+    double fastest = wl[0], slowest = wl[0];
+    for (int i = 1; i < NW; i++) {
+        fastest = py_max(fastest, wl[i]);
+        slowest = py_min(slowest, wl[i]);
+    }
     /* (the contact forces' acceleration, less the air's drag up to its doubt: SensorFaults._deceleration_unexplained) */
-    double v_fast = wl[0];
-    for (int i = 1; i < NW; i++)
-        v_fast = py_max(v_fast, wl[i]);
-    const double v_air = v_fast + k[K_WIND_DOUBT];
-    const double air = (k[K_ROLLING] * v_fast + k[K_DRAG] * v_fast * v_fast + k[K_DRAG_DOUBT] * v_air * v_air
-                        + k[K_DRAG] * k[K_WIND_DOUBT] * (v_fast + v_air)) / k[K_MASS];
-    if (!braking && !driving && a_raw - s.sensor_offset + spin_up + air < -k[K_UNEXPLAINED_DECEL])
+    const double accel_contact = a_raw - s.sensor_offset;   /* (on a grade gravity shifts no load either) */
+    const double v_air = fastest + k[K_WIND_DOUBT];
+    const double air = (k[K_ROLLING] * fastest + k[K_DRAG] * fastest * fastest + k[K_DRAG_DOUBT] * v_air * v_air
+                        + k[K_DRAG] * k[K_WIND_DOUBT] * (fastest + v_air)) / k[K_MASS];
+    if (!braking && !driving && accel_contact + spin_up + air < -k[K_UNEXPLAINED_DECEL])
         s.unexplained += (s.has_last_sample && s.last_sample != 0.0) ? py_max(0.0, t_c - s.last_sample) : 0.0;
     else
         s.unexplained = 0.0;
@@ -1185,11 +1186,6 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         if (store_state(fe, &s) < 0)
             return NULL;
         return make_result(result_type, Py_None, stale, f_implausible, NULL);
-    }
-    double fastest = wl[0], slowest = wl[0];
-    for (int i = 1; i < NW; i++) {
-        fastest = py_max(fastest, wl[i]);
-        slowest = py_min(slowest, wl[i]);
     }
     int free_rolling = !braking && !driving && fastest - slowest <= FREE_ROLLING_SPREAD * fastest + 0.3;
     for (int i = 0; free_rolling && i < NW; i++)
@@ -1222,7 +1218,6 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
 
     /* VehicleParams.normal_forces */
     const double h = k[K_CG_HEIGHT], wheelbase = k[K_CG_FRONT] + k[K_CG_REAR];
-    const double accel_contact = a_raw - s.sensor_offset;   /* (on a grade gravity shifts no load) */
     const double front_axle = k[K_MASS] * (GRAVITY * k[K_CG_REAR] - h * accel_contact) / wheelbase;
     const double rear_axle = k[K_MASS] * (GRAVITY * k[K_CG_FRONT] + h * accel_contact) / wheelbase;
     const double lat_f = h * a_lat / (k[K_TRACK_FRONT] * GRAVITY), lat_r = h * a_lat / (k[K_TRACK_REAR] * GRAVITY);

@@ -224,7 +224,7 @@ class BodyEquation:
         if not self._judge_brake_model(total_brake, brake_rate, needed, ratio, speed):
             if opts.pressure_lag_compensation:
                 self._learn_pressure_lag(raw_brake, raw_rate, needed)
-            self._learn_brake_gain(total_brake, needed - veh.mass * veh.wheel_radius * self._sensor_offset_mps2)
+            self._learn_brake_gain(total_brake, needed)
 
     def _judge_brake_model(self, total_brake: float, brake_rate: float, needed: float, ratio: float,
                            speed: float) -> bool:
@@ -270,10 +270,12 @@ class BodyEquation:
         self._brake_model_holds = released or not beyond_gains
         return released
 
-    def _learn_brake_gain(self, total_brake: float, needed_raw: float) -> None:
-        """The gain and the accelerometer's offset fitted to the torque the body needs from the raw
-        accelerometer, `needed_raw`, against the torque the pressures give (`gain_and_sensor_offset`),
-        by least squares with exponential forgetting: the first instants of a stop (a few N·m
+    def _learn_brake_gain(self, total_brake: float, needed: float) -> None:
+        """The gain and the accelerometer's own offset, fitted to the torque the body needs as the
+        raw accelerometer says it (`needed` takes off the offset held so far: that share is put
+        back) against the torque the pressures give (`gain_and_sensor_offset`); on level ground
+        the gain alone, `needed` as it is, free rolling's offset being the sensor's. By least
+        squares with exponential forgetting: the first instants of a stop (a few N·m
         against a wheel's inertia and a lagging accelerometer) weigh little against full
         braking. It converges within a stop, which matters because the gain also absorbs the
         car's load (a 25 % heavier car read 20 % too much μ until learnt); the gain's prior
@@ -285,19 +287,17 @@ class BodyEquation:
         lim = opts.brake_gain_limits
         mass_radius = veh.mass * veh.wheel_radius
         keep = self._brake_gain_keep()
-        if opts.level_road:
-            # The offset is free rolling's: the gain alone, each sample's ratio clipped to the limits.
-            ratio = (needed_raw + mass_radius * self._sensor_offset_mps2) / total_brake
-            ratio = min(max(ratio, 1.0 - lim), 1.0 + lim)
-            self._gain_sum_tt = keep * self._gain_sum_tt + total_brake * total_brake
-            self._gain_sum_tn = keep * self._gain_sum_tn + total_brake * total_brake * ratio
+        level = opts.level_road
+        band = 0.0 if level else mass_radius * SENSOR_OFFSET_LIMIT_MPS2
+        if not level:
+            needed -= mass_radius * self._sensor_offset_mps2
+        needed = min(max(needed, (1.0 - lim) * total_brake - band), (1.0 + lim) * total_brake + band)
+        self._gain_sum_tt = keep * self._gain_sum_tt + total_brake * total_brake
+        self._gain_sum_tn = keep * self._gain_sum_tn + total_brake * needed
+        if level:
             self._brake_gain_factor, self._brake_gain_doubt = gain_within_offset_ambiguity(
                 self._gain_sum_tn / self._gain_sum_tt, lim, self._unlearnt_offset_torque_nm())
             return
-        band = mass_radius * SENSOR_OFFSET_LIMIT_MPS2
-        needed = min(max(needed_raw, (1.0 - lim) * total_brake - band), (1.0 + lim) * total_brake + band)
-        self._gain_sum_tt = keep * self._gain_sum_tt + total_brake * total_brake
-        self._gain_sum_tn = keep * self._gain_sum_tn + total_brake * needed
         self._gain_sum_t = keep * self._gain_sum_t + total_brake
         self._gain_sum_n = keep * self._gain_sum_n + needed
         self._gain_sum_w = keep * self._gain_sum_w + 1.0

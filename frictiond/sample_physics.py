@@ -84,16 +84,17 @@ class SamplePhysics:
             return FrontEndResult(None, stale, fault)
         drive = self._drive_torques(inputs)
 
-        wheel_linear, stuck, braked, dead = self._wheel_states(t_c, omega, accel_long_raw - self._accel_bias_mps2,
-                                                               pressures)
+        # What the car's speed does (free rolling's offset off: on a grade, gravity's share too), and
+        # what its contact and air forces do (the sensor's own offset off).
+        accel_long = accel_long_raw - self._accel_bias_mps2
+        accel_contact = accel_long_raw - self._sensor_offset_mps2
+        wheel_linear, stuck, braked, dead = self._wheel_states(t_c, omega, accel_long, pressures)
         braking = any(braked)
         if not braking:
             self._brake_released = False    # (a new stop: the master pressure is the wheels' again)
         driving = self._has_drive_torque and any(abs(d) > MIN_DRIVE_TORQUE_NM for d in drive)
 
-        accel_long = accel_long_raw - self._accel_bias_mps2
-        if self._deceleration_unexplained(t_c, braking or driving, accel_long_raw - self._sensor_offset_mps2, omega_dot,
-                                          max(wheel_linear)):
+        if self._deceleration_unexplained(t_c, braking or driving, accel_contact, omega_dot, max(wheel_linear)):
             return FrontEndResult(None, stale, "brake pressure implausible")
         speed, from_ref = self._speed_and_offset(t_c, wheel_linear, omega_dot, accel_long, accel_long_raw,
                                                  braking or driving)
@@ -102,8 +103,7 @@ class SamplePhysics:
         if yaw_rate is None or not math.isfinite(yaw_rate):
             yaw_rate = accel_lat / speed if speed > opts.min_speed else 0.0
 
-        # (the contact forces' acceleration: on a grade gravity shifts no load)
-        loads = veh.normal_forces(accel_long_raw - self._sensor_offset_mps2, accel_lat)
+        loads = veh.normal_forces(accel_contact, accel_lat)   # (on a grade gravity shifts no load)
         forces = self._tyre_forces(t_c, omega_dot, glitch, pressures, accel_long_raw, speed, drive, wheel_linear,
                                    braking)
         mus = [force / load if load > MIN_LOAD_N else 0.0 for force, load in zip(forces, loads)]

@@ -514,7 +514,7 @@ enum {
 /* The FrontEnd attributes sample_physics reads and writes. */
 static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples, *A_bias_m2,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn, *A_gain_t, *A_gain_n,
-    *A_gain_w, *A_sensor_offset, *A_sensor_offset_doubt,
+    *A_gain_w, *A_sensed_needed, *A_sensed_needed_time, *A_sensor_offset, *A_sensor_offset_doubt,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_gain_doubt, *A_model_holds, *A_released,
     *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_restarted_braking;
 
@@ -527,6 +527,7 @@ typedef struct {
     double last_sample, bias, unexplained, speed_time, speed_est, slipping_time, faster_since;
     long bias_samples, ref_disagreements;
     double bias_m2;
+    double sensed_needed, sensed_needed_time;
     double gain_tt, gain_tn, gain_t, gain_n, gain_w, sensor_offset, sensor_offset_doubt, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor, gain_doubt;
     double unjudged;
     int model_holds, released;
@@ -619,6 +620,8 @@ static int load_state(PyObject *fe, FEState *s)
         || get_float_attr(fe, A_gain_tt, &s->gain_tt, NULL) < 0 || get_float_attr(fe, A_gain_tn, &s->gain_tn, NULL) < 0
         || get_float_attr(fe, A_gain_t, &s->gain_t, NULL) < 0 || get_float_attr(fe, A_gain_n, &s->gain_n, NULL) < 0
         || get_float_attr(fe, A_gain_w, &s->gain_w, NULL) < 0
+        || get_float_attr(fe, A_sensed_needed, &s->sensed_needed, NULL) < 0
+        || get_float_attr(fe, A_sensed_needed_time, &s->sensed_needed_time, NULL) < 0
         || get_float_attr(fe, A_sensor_offset, &s->sensor_offset, NULL) < 0
         || get_float_attr(fe, A_sensor_offset_doubt, &s->sensor_offset_doubt, NULL) < 0
         || get_float_attr(fe, A_recent_weight, &s->recent_weight, NULL) < 0
@@ -704,6 +707,8 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_gain_t, PyFloat_FromDouble(s->gain_t)) < 0
         || set_attr_new(fe, A_gain_n, PyFloat_FromDouble(s->gain_n)) < 0
         || set_attr_new(fe, A_gain_w, PyFloat_FromDouble(s->gain_w)) < 0
+        || set_attr_new(fe, A_sensed_needed, PyFloat_FromDouble(s->sensed_needed)) < 0
+        || set_attr_new(fe, A_sensed_needed_time, PyFloat_FromDouble(s->sensed_needed_time)) < 0
         || set_attr_new(fe, A_sensor_offset, PyFloat_FromDouble(s->sensor_offset)) < 0
         || set_attr_new(fe, A_sensor_offset_doubt, PyFloat_FromDouble(s->sensor_offset_doubt)) < 0
         || set_attr_new(fe, A_recent_weight, PyFloat_FromDouble(s->recent_weight)) < 0
@@ -996,19 +1001,28 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
     if (!released) {
         if (k[K_LAG_COMPENSATION] != 0.0)
             learn_pressure_lag(s, k, raw_brake, raw_rate, needed);
+        /* (body_equation.BodyEquation._needed_as_sensed: N through the sensors' learnt lag, fitted
+         * against the pressures as read) */
+        const double lag = s->lag[LAG_LAG], now = s->lag[LAG_TIME];
+        const double elapsed = now - s->sensed_needed_time;
+        double sensed = needed;
+        if (lag > 0.0 && isfinite(s->sensed_needed) && 0.0 < elapsed && elapsed <= 1.5 * k[K_SAMPLE_PERIOD])
+            sensed = s->sensed_needed + (needed - s->sensed_needed) * -expm1(-elapsed / lag);
+        s->sensed_needed = sensed;
+        s->sensed_needed_time = now;
         /* (body_equation.BodyEquation._learn_brake_gain) */
         const int level = k[K_LEVEL_ROAD] != 0.0;
         const double mass_radius = k[K_MASS] * k[K_RADIUS], band = level ? 0.0 : mass_radius * SENSOR_OFFSET_LIMIT;
         const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_GAIN_TAU], 1e-3));
-        const double fitted = level ? needed : needed - mass_radius * s->sensor_offset;
-        const double n = py_min(py_max(fitted, (1.0 - lim) * total_brake - band), (1.0 + lim) * total_brake + band);
-        s->gain_tt = keep * s->gain_tt + total_brake * total_brake;
-        s->gain_tn = keep * s->gain_tn + total_brake * n;
+        const double fitted = level ? sensed : sensed - mass_radius * s->sensor_offset;
+        const double n = py_min(py_max(fitted, (1.0 - lim) * raw_brake - band), (1.0 + lim) * raw_brake + band);
+        s->gain_tt = keep * s->gain_tt + raw_brake * raw_brake;
+        s->gain_tn = keep * s->gain_tn + raw_brake * n;
         double gain;
         if (level)
             gain = s->gain_tn / s->gain_tt;
         else {
-            s->gain_t = keep * s->gain_t + total_brake;
+            s->gain_t = keep * s->gain_t + raw_brake;
             s->gain_n = keep * s->gain_n + n;
             s->gain_w = keep * s->gain_w + 1.0;
             gain = gain_and_sensor_offset(s, SENSOR_OFFSET_PRIOR_S / k[K_SAMPLE_PERIOD], mass_radius,
@@ -1329,6 +1343,7 @@ static int intern_attributes(void)
         {&A_speed_time, "_speed_time_s"}, {&A_speed_est, "_speed_estimate_mps"},
         {&A_ref_disagreements, "_ref_disagreements"}, {&A_gain_tt, "_gain_sum_tt"}, {&A_gain_tn, "_gain_sum_tn"},
         {&A_gain_t, "_gain_sum_t"}, {&A_gain_n, "_gain_sum_n"}, {&A_gain_w, "_gain_sum_w"},
+        {&A_sensed_needed, "_sensed_needed_nm"}, {&A_sensed_needed_time, "_sensed_needed_time_s"},
         {&A_sensor_offset, "_sensor_offset_mps2"}, {&A_sensor_offset_doubt, "_sensor_offset_doubt_mps2"},
         {&A_recent_weight, "_recent_weight_nm"},
         {&A_recent_lag, "_recent_lag_nm"}, {&A_last_brake, "_last_brake_nm"}, {&A_recent_needed, "_recent_needed_nm"}, {&A_recent_brake, "_recent_brake_nm"},

@@ -2,9 +2,9 @@
 
     .venv/bin/python benchmarks/campaign.py [--stops 1000] [--set held-out|dev|both] [--workers N]
         [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--clean-sensors] [--pre-roll S] [--grade G]
-        [--save FILE.json|.parquet] [--worst 15]
+        [--payload KG] [--accel-offset A] [--save FILE.json|.parquet] [--worst 15]
     .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--clean-sensors] [--pre-roll S]
-        [--grade G] [--write-log DIR]
+        [--grade G] [--payload KG] [--accel-offset A] [--write-log DIR]
 
 Each stop is drawn from its seed (`frictiond.campaign.draw`, ranges in its docstring): a car,
 tyres (Burckhardt or Magic Formula, never the estimator's LuGre), an ABS family, sensors and a
@@ -19,19 +19,23 @@ seconds after the start instead of 0.8–1.2 s (`draw.with_pre_roll`; a change o
 was along the braking distance): the front end then has had little or no free rolling to learn
 the accelerometer's offset from, as after a start-up just before a stop. `--grade G` puts every
 stop on a grade of G (rise over run, uphill positive) in place of the one it drew: what free
-rolling teaches of the accelerometer then holds gravity's share along the road.
+rolling teaches of the accelerometer then holds gravity's share along the road. `--payload KG`
+puts KG aboard every car (the config knows none of it; drawn: 0–120 kg) and `--accel-offset A`
+gives every accelerometer an offset of size A (its drawn sign kept; drawn: 0–0.3 m/s²): a loaded
+car, a sensor mounted tilted, beyond the ranges the estimator was tuned on.
 Printed: the issue's targets with PASS/FAIL per estimator, the comparison, a table per family,
 distributions, and the worst stops each with the command that reproduces it.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
 import time
 
-from frictiond.campaign.draw import MAX_GRADE_SET, draw_stop, seeds_for
+from frictiond.campaign.draw import Stress, draw_stop, seeds_for
 from frictiond.campaign.logs import replay_commands, write_stop_files
 from frictiond.campaign.report import full_report, reason
 from frictiond.campaign.run import run_campaign, save_rows
@@ -39,9 +43,8 @@ from frictiond.campaign.score import score_stop
 from frictiond.campaign.simulate import simulate_stop
 
 
-def reproduce(seed: int, family: str | None, directory: str | None, clean_sensors: bool = False,
-              pre_roll_s: float | None = None, grade: float | None = None) -> int:
-    spec = draw_stop(seed, family, clean_sensors, pre_roll_s, grade)
+def reproduce(seed: int, family: str | None, directory: str | None, stress: Stress | None = None) -> int:
+    spec = draw_stop(seed, family, stress)
     stop = simulate_stop(spec)
     row = score_stop(stop)
     print(f"seed {seed}: {spec.family}, surfaces {spec.surface_labels}, {spec.speed0_mps * 3.6:.0f} km/h, "
@@ -82,18 +85,23 @@ def main(argv: list[str] | None = None) -> int:
                         "after the start (default: drawn, 0.8-1.2 s)")
     parser.add_argument("--grade", type=float, default=None, metavar="G", help="every stop on this grade, rise "
                         "over run, uphill positive (default: drawn; a third level, the rest within ±0.08)")
+    parser.add_argument("--payload", type=float, default=None, metavar="KG", help="every car this loaded "
+                        "beyond its configured mass (default: drawn, 0-120 kg)")
+    parser.add_argument("--accel-offset", type=float, default=None, metavar="A", help="every accelerometer's "
+                        "offset this large, m/s², its drawn sign kept (default: drawn, 0-0.3)")
     parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
     parser.add_argument("--worst", type=int, default=15)
     parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
     parser.add_argument("--write-log", default=None, metavar="DIR", help="with --reproduce: write log, DBC, "
                         "configs, truth CSV")
     args = parser.parse_args(argv)
-    if args.pre_roll is not None and not args.pre_roll >= 0.0:
-        parser.error(f"--pre-roll must be ≥ 0, not {args.pre_roll}")
-    if args.grade is not None and not abs(args.grade) <= MAX_GRADE_SET:
-        parser.error(f"--grade must be within ±{MAX_GRADE_SET}, not {args.grade}")
+    try:
+        stress = Stress(args.clean_sensors, args.pre_roll, args.grade, args.payload, args.accel_offset)
+    except ValueError as exc:
+        parser.error(str(exc).replace("pre_roll_s", "--pre-roll").replace("payload_kg", "--payload")
+                     .replace("accel_offset_mps2", "--accel-offset").replace("grade", "--grade"))
     if args.reproduce is not None:
-        return reproduce(args.reproduce, args.family, args.write_log, args.clean_sensors, args.pre_roll, args.grade)
+        return reproduce(args.reproduce, args.family, args.write_log, stress)
     sets = ("dev", "held-out") if args.which == "both" else (args.which,)
     all_rows = []
     for which in sets:
@@ -101,23 +109,19 @@ def main(argv: list[str] | None = None) -> int:
         started = time.perf_counter()
         rows = run_campaign(seeds, workers=args.workers, chunk=args.chunk, family=args.family,
                             scheduler=args.scheduler, progress=progress_printer(which, started),
-                            clean_sensors=args.clean_sensors, pre_roll_s=args.pre_roll, grade=args.grade)
+                            stress=stress)
         wall = time.perf_counter() - started
         cpu = sum(r.get("sim_cpu_s", 0.0) + r.get("lugre_cpu_s", 0.0) + r.get("rls_cpu_s", 0.0) for r in rows)
         print(f"\n##### {which} seeds {seeds[0]}…{seeds[-1]}: {len(rows)} stops in {wall:.0f} s wall "
               f"({args.workers if args.workers is not None else os.cpu_count()} workers; CPU per stop "
               f"{cpu / max(len(rows), 1):.2f} s: simulation + both estimators)\n")
-        title = (f"{which} seeds" + (", clean sensors" if args.clean_sensors else "")
-                 + (f", braked {args.pre_roll:g} s after the start" if args.pre_roll is not None else "")
-                 + (f", on a grade of {args.grade:g}" if args.grade is not None else ""))
-        print(full_report(rows, title, args.worst, args.family, args.clean_sensors, args.pre_roll, args.grade))
+        print(full_report(rows, f"{which} seeds{stress.describe()}", args.worst, args.family, stress))
         for r in rows:
             r["set"] = which
         all_rows.extend(rows)
     if args.save:
         save_rows(all_rows, args.save, {"stops": args.stops, "sets": list(sets), "family": args.family,
-                                        "clean_sensors": args.clean_sensors, "pre_roll_s": args.pre_roll,
-                                        "grade": args.grade})
+                                        **dataclasses.asdict(stress)})
         print(f"\nsaved {len(all_rows)} rows to {args.save}")
     return 0
 

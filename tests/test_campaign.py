@@ -12,7 +12,7 @@ import pytest
 
 from frictiond.campaign import draw as draw_mod
 from frictiond.campaign.abs_control import ABS_FAMILIES
-from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, draw_stop, seeds_for
+from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, Stress, draw_stop, seeds_for
 from frictiond.campaign.report import format_families, format_not_valid, full_report, reproduce_command, target_rows
 from frictiond.campaign.run import load_rows, run_campaign, save_rows
 from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, REAR_WHEEL_MESSAGE, WHEEL_MESSAGE
@@ -436,7 +436,7 @@ def test_the_reproduce_command_runs_a_clean_sensors_stop(capsys):
     noisy = capsys.readouterr().out.splitlines()
     # the same stop (family, surfaces, speed), other signals on the bus
     assert clean[0].split(" km/h")[0] == noisy[0].split(" km/h")[0] and clean[1:] != noisy[1:]
-    assert reproduce_command({"seed": 1000002}, None, clean_sensors=True).startswith(
+    assert reproduce_command({"seed": 1000002}, None, Stress(clean_sensors=True)).startswith(
         "python benchmarks/campaign.py --reproduce 1000002 --clean-sensors ")
 
 
@@ -451,7 +451,7 @@ def test_a_stop_braked_soon_after_the_start_is_the_same_stop_braked_earlier():
     assert 0.1 <= onset < 0.15
     with pytest.raises(ValueError, match="pre_roll_s"):
         draw_stop(3, pre_roll_s=-1.0)
-    assert " --pre-roll 0.1 " in reproduce_command({"seed": 3}, None, pre_roll_s=0.1)
+    assert " --pre-roll 0.1 " in reproduce_command({"seed": 3}, None, Stress(pre_roll_s=0.1))
 
 
 def test_a_stop_set_on_a_grade_is_the_same_stop_on_that_grade():
@@ -460,6 +460,27 @@ def test_a_stop_set_on_a_grade_is_the_same_stop_on_that_grade():
     assert dataclasses.replace(spec, grade=-0.05) == graded
     with pytest.raises(ValueError, match="grade"):
         draw_stop(3, grade=0.5)
-    assert " --grade -0.05 " in reproduce_command({"seed": 3}, None, grade=-0.05)
-    rows = run_campaign([3], workers=0, grade=0.04)
+    assert " --grade -0.05 " in reproduce_command({"seed": 3}, None, Stress(grade=-0.05))
+    rows = run_campaign([3], workers=0, stress=Stress(grade=0.04))
     assert rows[0]["grade"] == 0.04 and not rows[0].get("sim_error")
+
+
+def test_a_stop_set_loaded_or_with_a_tilted_accelerometer_is_the_same_stop_otherwise():
+    spec = draw_stop(5)
+    loaded = draw_stop(5, payload_kg=400.0)
+    assert dataclasses.replace(spec, car=dataclasses.replace(spec.car, payload_kg=400.0)) == loaded
+    assert loaded.car.true_mass_kg == spec.car.mass_kg + 400.0
+    tilted = draw_stop(5, accel_offset_mps2=0.45)
+    drawn = spec.sensors.accel_offset_mps2
+    assert drawn != 0.0 and tilted.sensors.accel_offset_mps2 == math.copysign(0.45, drawn)
+    assert dataclasses.replace(tilted, sensors=spec.sensors) == spec
+    # (clean sensors have no offset of their own: the one set is positive)
+    assert draw_stop(5, clean_sensors=True, accel_offset_mps2=0.45).sensors.accel_offset_mps2 == 0.45
+    for bad in ({"payload_kg": -1.0}, {"accel_offset_mps2": -0.1}, {"accel_offset_mps2": math.nan}):
+        with pytest.raises(ValueError):
+            draw_stop(5, **bad)
+    stress = Stress(payload_kg=400.0, accel_offset_mps2=0.45)
+    assert " --payload 400 --accel-offset 0.45 " in reproduce_command({"seed": 5}, None, stress)
+    assert stress.describe() == ", 400 kg aboard, accelerometer offset ±0.45 m/s²"
+    rows = run_campaign([5], workers=0, stress=stress)
+    assert rows[0]["payload_kg"] == 400.0 and rows[0]["accel_offset"] == round(math.copysign(0.45, drawn), 3)

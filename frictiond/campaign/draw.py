@@ -70,6 +70,7 @@ Sensors (see sensors.py)
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -89,7 +90,9 @@ JUMPS = ("dry-wet", "wet-dry", "to-ice")
 D_MIN_PEAK = 0.15
 GRADED_SHARE = 2.0 / 3.0     # of the stops on a grade (the rest on the flat)
 MAX_GRADE = 0.08             # rise over run, either way: a steep main road
-MAX_GRADE_SET = 0.3          # ... and what a stress run may set (`draw_stop`'s `grade`)
+MAX_GRADE_SET = 0.3          # ... and what a stress run may set (`Stress.grade`)
+MAX_PAYLOAD_SET_KG = 2000.0  # what a stress run may put aboard (`Stress.payload_kg`)
+MAX_ACCEL_OFFSET_SET = 2.0   # ... and the accelerometer's offset it may set (`Stress.accel_offset_mps2`)
 
 
 @dataclass(frozen=True)
@@ -302,15 +305,67 @@ def _apply_family(choices: list[str], family: str | None) -> list[str]:
     return [_match(c, o, w) for c, o, w in zip(choices, options, parts)]
 
 
-def draw_stop(seed: int, family: str | None = None, clean_sensors: bool = False,
-              pre_roll_s: float | None = None, grade: float | None = None) -> StopSpec:
+@dataclass(frozen=True)
+class Stress:
+    """What a stress run sets on every stop in place of what the stop drew (None: as drawn):
+    `clean_sensors`, its sensors' imperfections taken off (`clean`); `pre_roll_s`, the brake
+    applied this soon after the start (`with_pre_roll`); `grade` (rise over run, uphill
+    positive); `payload_kg`, the load aboard that the config does not know; `accel_offset_mps2`,
+    the size of the accelerometer's offset (its drawn sign kept). The last two probe beyond the
+    draw's ranges (0–120 kg, 0–0.3 m/s²): a loaded car, a sensor mounted tilted."""
+
+    clean_sensors: bool = False
+    pre_roll_s: float | None = None
+    grade: float | None = None
+    payload_kg: float | None = None
+    accel_offset_mps2: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.pre_roll_s is not None and not self.pre_roll_s >= 0.0:
+            raise ValueError(f"pre_roll_s must be ≥ 0, not {self.pre_roll_s}")
+        if self.grade is not None and not abs(self.grade) <= MAX_GRADE_SET:
+            raise ValueError(f"grade must be within ±{MAX_GRADE_SET}, not {self.grade}")
+        if self.payload_kg is not None and not 0.0 <= self.payload_kg <= MAX_PAYLOAD_SET_KG:
+            raise ValueError(f"payload_kg must be within 0…{MAX_PAYLOAD_SET_KG:g}, not {self.payload_kg}")
+        if self.accel_offset_mps2 is not None and not 0.0 <= self.accel_offset_mps2 <= MAX_ACCEL_OFFSET_SET:
+            raise ValueError(f"accel_offset_mps2 must be within 0…{MAX_ACCEL_OFFSET_SET:g}, "
+                             f"not {self.accel_offset_mps2}")
+
+    def apply(self, spec: StopSpec) -> StopSpec:
+        """`spec` with these settings (`clean_sensors` is `draw_stop`'s, before the drive is drawn)."""
+        if self.grade is not None:
+            spec = replace(spec, grade=float(self.grade))
+        if self.payload_kg is not None:
+            spec = replace(spec, car=replace(spec.car, payload_kg=float(self.payload_kg)))
+        if self.accel_offset_mps2 is not None:
+            drawn = spec.sensors.accel_offset_mps2
+            offset = math.copysign(float(self.accel_offset_mps2), drawn if drawn != 0.0 else 1.0)
+            spec = replace(spec, sensors=replace(spec.sensors, accel_offset_mps2=offset))
+        return spec if self.pre_roll_s is None else with_pre_roll(spec, self.pre_roll_s)
+
+    def flags(self) -> str:
+        """The options of `benchmarks/campaign.py` that set these (each with a leading space)."""
+        return "".join([" --clean-sensors" if self.clean_sensors else "",
+                        f" --pre-roll {self.pre_roll_s:g}" if self.pre_roll_s is not None else "",
+                        f" --grade {self.grade:g}" if self.grade is not None else "",
+                        f" --payload {self.payload_kg:g}" if self.payload_kg is not None else "",
+                        f" --accel-offset {self.accel_offset_mps2:g}" if self.accel_offset_mps2 is not None else ""])
+
+    def describe(self) -> str:
+        """These settings for a report's title (", clean sensors, on a grade of 0.04", or "")."""
+        return "".join([", clean sensors" if self.clean_sensors else "",
+                        f", braked {self.pre_roll_s:g} s after the start" if self.pre_roll_s is not None else "",
+                        f", on a grade of {self.grade:g}" if self.grade is not None else "",
+                        f", {self.payload_kg:g} kg aboard" if self.payload_kg is not None else "",
+                        f", accelerometer offset ±{self.accel_offset_mps2:g} m/s²"
+                        if self.accel_offset_mps2 is not None else ""])
+
+
+def draw_stop(seed: int, family: str | None = None, stress: Stress | None = None, **settings: Any) -> StopSpec:
     """The stop of `seed`. `family`: "ABS[/TYRE[/MANOEUVRE]]", each part a prefix of one of
     `ABS_FAMILIES`, `TYRE_FAMILIES`, `MANOEUVRES` or "*" (e.g. "c", "a/magic", "*/*/split").
-    `clean_sensors`: the same stop with its sensors' imperfections taken off (`clean`).
-    `pre_roll_s`: the same stop braked this soon after the start (`with_pre_roll`).
-    `grade`: the same stop on this grade (rise over run, uphill positive) in place of the drawn."""
-    if grade is not None and not abs(grade) <= MAX_GRADE_SET:
-        raise ValueError(f"grade must be within ±{MAX_GRADE_SET}, not {grade}")
+    `stress` (or its fields as keywords, e.g. `grade=0.04`): what to set in place of the draw."""
+    stress = replace(stress or Stress(), **settings)
     streams = [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(6)]
     pick, car_rng, tyre_rng, abs_rng, sensor_rng, drive_rng = streams
     choices = [_pick(pick, ABS_FAMILIES, (27, 27, 27, 19)), _pick(pick, TYRE_FAMILIES, (1, 1)),
@@ -325,15 +380,13 @@ def draw_stop(seed: int, family: str | None = None, clean_sensors: bool = False,
     abs_params = _draw_abs_params(abs_rng)[abs_family]
     abs_cycle, cutout = abs_rng.uniform(0.005, 0.010), abs_rng.uniform(1.5, 3.0)
     sensors = _draw_sensors(sensor_rng)
-    if clean_sensors:
+    if stress.clean_sensors:
         sensors = clean(sensors)
     spec = _draw_drive(drive_rng, StopSpec(
         seed=int(seed), abs_family=abs_family, tyre_family=tyre_family, manoeuvre=manoeuvre, car=car,
         surfaces=surfaces, relaxation_m=relaxation, sensors=sensors, abs_params=abs_params,
         abs_cycle_s=abs_cycle, abs_cutout_mps=cutout, jump_kind=jump_kind))
-    if grade is not None:
-        spec = replace(spec, grade=float(grade))
-    return spec if pre_roll_s is None else with_pre_roll(spec, pre_roll_s)
+    return stress.apply(spec)
 
 
 def with_pre_roll(spec: StopSpec, pre_roll_s: float) -> StopSpec:

@@ -10,6 +10,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from .draw import Stress
 from .score import CALIBRATION_LEVELS, ESTIMATORS, UTILISATION_SHOWN
 
 Row = dict[str, Any]
@@ -264,24 +265,20 @@ def format_not_valid(rows: Sequence[Row], p: str = "lugre", top: int = 4) -> str
     return "\n".join(lines)
 
 
-def reproduce_command(r: Row, family: str | None = None, clean_sensors: bool = False,
-                      pre_roll_s: float | None = None, grade: float | None = None) -> str:
+def reproduce_command(r: Row, family: str | None = None, stress: Stress | None = None) -> str:
     fam = f" --family {family}" if family else ""
-    clean = " --clean-sensors" if clean_sensors else ""
-    early = f" --pre-roll {pre_roll_s:g}" if pre_roll_s is not None else ""
-    graded = f" --grade {grade:g}" if grade is not None else ""
-    return (f"python benchmarks/campaign.py --reproduce {r['seed']}{fam}{clean}{early}{graded} "
-            f"--write-log /tmp/s{r['seed']}")
+    flags = stress.flags() if stress is not None else ""
+    return f"python benchmarks/campaign.py --reproduce {r['seed']}{fam}{flags} --write-log /tmp/s{r['seed']}"
 
 
 def format_worst(rows: Sequence[Row], n: int, family: str | None = None, p: str = "lugre",
-                 clean_sensors: bool = False, pre_roll_s: float | None = None, grade: float | None = None) -> str:
+                 stress: Stress | None = None) -> str:
     ranked = sorted(usable(rows), key=lambda r: -badness(r, p))[:n]
     lines = [f"== worst {len(ranked)} stops for {ESTIMATORS[p]} =="]
     for r in ranked:
         lines.append(f"seed {r['seed']:>8d}  {r['family']:34s} {r['surfaces']:28s} {r['speed0_kmh']:5.0f} km/h  "
                      f"{reason(r, p)}")
-        lines.append(f"    {reproduce_command(r, family, clean_sensors, pre_roll_s, grade)}")
+        lines.append(f"    {reproduce_command(r, family, stress)}")
     errors = [r for r in rows if r.get("sim_error")]
     for r in errors[:n]:
         lines.append(f"seed {r['seed']:>8d}  generator error: {r['sim_error']}")
@@ -289,8 +286,7 @@ def format_worst(rows: Sequence[Row], n: int, family: str | None = None, p: str 
 
 
 def full_report(rows: Sequence[Row], title: str, worst: int = 15, family: str | None = None,
-                clean_sensors: bool = False, pre_roll_s: float | None = None, grade: float | None = None) -> str:
+                stress: Stress | None = None) -> str:
     return "\n\n".join([format_targets(rows, title), format_comparison(rows), format_families(rows),
                         format_not_valid(rows), format_distributions(rows),
-                        format_worst(rows, worst, family, clean_sensors=clean_sensors, pre_roll_s=pre_roll_s,
-                                     grade=grade)])
+                        format_worst(rows, worst, family, stress=stress)])

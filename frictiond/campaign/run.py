@@ -8,6 +8,7 @@ from concurrent.futures import as_completed
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from .draw import Stress
 from .score import run_seeds
 
 Row = dict[str, Any]
@@ -20,25 +21,23 @@ def chunks(seeds: Sequence[int], size: int) -> list[list[int]]:
 
 def run_campaign(seeds: Sequence[int], *, workers: int | None = None, chunk: int = 8, family: str | None = None,
                  scheduler: str | None = None, progress: Callable[[int, int], None] | None = None,
-                 clean_sensors: bool = False, pre_roll_s: float | None = None,
-                 grade: float | None = None) -> list[Row]:
+                 stress: Stress | None = None) -> list[Row]:
     """Rows of every seed, in seed order. `workers=0`: in this process, one after the other;
-    otherwise Dask workers (`None`: one per core) or the cluster at `scheduler`.
-    `clean_sensors`: every stop with its sensors' imperfections taken off (`draw.clean`);
-    `pre_roll_s`: every stop braked this soon after the start (`draw.with_pre_roll`);
-    `grade`: every stop on this grade in place of its drawn one."""
+    otherwise Dask workers (`None`: one per core) or the cluster at `scheduler`. `stress`: what
+    every stop sets in place of its draw (`draw.Stress`: clean sensors, an early brake, a grade,
+    a payload, an accelerometer offset)."""
     rows: list[Row] = []
     parts = chunks(seeds, chunk)
     if workers == 0 and scheduler is None:
         for part in parts:
-            rows.extend(run_seeds(part, family, clean_sensors, pre_roll_s, grade))
+            rows.extend(run_seeds(part, family, stress))
             if progress:
                 progress(len(rows), len(seeds))
     else:
         from ..fleet.cluster import open_executor
 
         with open_executor(scheduler, workers) as executor:
-            futures = [executor.submit(run_seeds, part, family, clean_sensors, pre_roll_s, grade) for part in parts]
+            futures = [executor.submit(run_seeds, part, family, stress) for part in parts]
             for future in as_completed(futures):
                 rows.extend(future.result())
                 if progress:

@@ -24,7 +24,7 @@ import numpy as np
 from ..evaluation import CONVERGED_REL, evaluate
 from ..replay import estimates_of
 from ..samples import FrictionEstimate, Status
-from .draw import StopSpec, draw_stop
+from .draw import StopSpec, Stress, draw_stop
 from .simulate import CampaignStop, simulate_stop
 
 ESTIMATORS = {"lugre": "lugre-tr", "rls": "burckhardt-rls"}   # row prefix → estimator.kind
@@ -136,11 +136,11 @@ def score_stop(stop: CampaignStop) -> dict[str, Any]:
     return row
 
 
-def run_seed(seed: int, family: str | None = None, clean_sensors: bool = False,
-             pre_roll_s: float | None = None, grade: float | None = None) -> dict[str, Any]:
-    """Draw, simulate and score one seed (the unit of work a campaign worker runs)."""
+def run_seed(seed: int, family: str | None = None, stress: Stress | None = None) -> dict[str, Any]:
+    """Draw (with `stress`'s settings in place of the draw's), simulate and score one seed (the
+    unit of work a campaign worker runs)."""
     t0 = time.process_time()
-    spec = draw_stop(seed, family, clean_sensors, pre_roll_s, grade)
+    spec = draw_stop(seed, family, stress)
     try:
         stop = simulate_stop(spec)
     except Exception as exc:   # a generator bug must show as such, with its seed
@@ -152,8 +152,7 @@ def run_seed(seed: int, family: str | None = None, clean_sensors: bool = False,
     return row
 
 
-def run_seeds(seeds: Sequence[int], family: str | None = None, clean_sensors: bool = False,
-              pre_roll_s: float | None = None, grade: float | None = None) -> list[dict[str, Any]]:
+def run_seeds(seeds: Sequence[int], family: str | None = None, stress: Stress | None = None) -> list[dict[str, Any]]:
     """A chunk of seeds in one task (fewer, larger Dask tasks: the scheduler's cost per task
     is comparable to a short stop's)."""
-    return [run_seed(s, family, clean_sensors, pre_roll_s, grade) for s in seeds]
+    return [run_seed(s, family, stress) for s in seeds]

@@ -479,7 +479,8 @@ enum {
     K_MAX_ALL_WHEEL_SLIP, K_SAMPLE_PERIOD, K_BIAS_TAU, K_MASS, K_CG_HEIGHT, K_CG_FRONT, K_CG_REAR, K_TRACK_FRONT,
     K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
     K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_MASTER_ONLY, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
-    K_LAG_COMPENSATION, K_BIAS_SETTLE, K_CORRECTION_RATE, K_CORRECTION_HOLD, K_DRAG_DOUBT, K_WIND_DOUBT, K_LEVEL_ROAD, K_COUNT
+    K_LAG_COMPENSATION, K_BIAS_SETTLE, K_CORRECTION_RATE, K_CORRECTION_HOLD, K_DRAG_DOUBT, K_WIND_DOUBT, K_LEVEL_ROAD,
+    K_ACCEL_TOLERANCE, K_COUNT
 };
 
 #define MAX_ABS_ACCEL 30.0
@@ -494,7 +495,6 @@ enum {
 #define BODY_ACCEL_TOLERANCE 0.05
 #define PRESSURE_TOLERANCE 0.25
 #define FAULT_WIND 5.0           /* body_equation.FAULT_WIND_MPS */
-#define UNLEARNT_ACCEL_TOLERANCE 0.3
 #define ACCEL_BIAS_LEARNT_SAMPLES 50
 #define ACCEL_BIAS_PRIOR_SAMPLES 2.0
 #define SENSOR_OFFSET_PRIOR_S 0.2      /* body_equation.SENSOR_OFFSET_PRIOR_S */
@@ -885,28 +885,27 @@ static void learn_pressure_lag(FEState *s, const double *k, double brake, double
 }
 
 /* body_equation.offset_doubt_mps2: what the offset learnt from free rolling may still be off by. */
-static double offset_doubt(long samples, double sum_squares)
+static double offset_doubt(long samples, double sum_squares, double tolerance)
 {
     if (samples >= ACCEL_BIAS_LEARNT_SAMPLES)
         return 0.0;
-    const double variance = (sum_squares + ACCEL_BIAS_PRIOR_SAMPLES * UNLEARNT_ACCEL_TOLERANCE * UNLEARNT_ACCEL_TOLERANCE)
+    const double variance = (sum_squares + ACCEL_BIAS_PRIOR_SAMPLES * tolerance * tolerance)
                             / ((double)(samples > 1 ? samples - 1 : 0) + ACCEL_BIAS_PRIOR_SAMPLES);
-    return py_min(UNLEARNT_ACCEL_TOLERANCE, sqrt(3.0 * variance / (double)(samples > 1 ? samples : 1)));
+    return py_min(tolerance, sqrt(3.0 * variance / (double)(samples > 1 ? samples : 1)));
 }
 
 /* body_equation.gain_and_sensor_offset: the brake gain (returned) and the accelerometer's offset
  * (*offset) of N = G·T − M·R·s by least squares with a prior of s = 0, and what s may be off by. */
-static double gain_and_sensor_offset(const FEState *s, double prior_samples, double mass_radius, double *offset,
-                                     double *doubt)
+static double gain_and_sensor_offset(const FEState *s, double prior_samples, double mass_radius, double tolerance,
+                                     double *offset, double *doubt)
 {
     const double a11 = s->gain_tt, a12 = s->gain_t, a22 = s->gain_w + prior_samples;
     const double det = a11 * a22 - a12 * a12;
     if (!(det > 0.0 && isfinite(det))) {
         *offset = 0.0;
-        *doubt = UNLEARNT_ACCEL_TOLERANCE;
+        *doubt = tolerance;
         return s->gain_tn / s->gain_tt;
     }
-    const double tolerance = UNLEARNT_ACCEL_TOLERANCE;
     const double fit = -(a11 * s->gain_n - a12 * s->gain_tn) / det / mass_radius;
     const double spread = tolerance * sqrt(py_min(1.0, prior_samples * a11 / det));
     if (fabs(fit) > tolerance) {
@@ -1026,7 +1025,7 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
             s->gain_n = keep * s->gain_n + n;
             s->gain_w = keep * s->gain_w + 1.0;
             gain = gain_and_sensor_offset(s, SENSOR_OFFSET_PRIOR_S / k[K_SAMPLE_PERIOD], mass_radius,
-                                          &s->sensor_offset, &s->sensor_offset_doubt);
+                                          k[K_ACCEL_TOLERANCE], &s->sensor_offset, &s->sensor_offset_doubt);
         }
         /* (body_equation.BodyEquation._unlearnt_offset_torque_nm) */
         const double doubt = s->sensor_offset_doubt;
@@ -1219,7 +1218,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
             s.bias_m2 += (error - before) * (error - s.bias);
             if (k[K_LEVEL_ROAD] != 0.0) {
                 s.sensor_offset = s.bias;
-                s.sensor_offset_doubt = offset_doubt(s.bias_samples, s.bias_m2);
+                s.sensor_offset_doubt = offset_doubt(s.bias_samples, s.bias_m2, k[K_ACCEL_TOLERANCE]);
             }
         }
     }

@@ -95,7 +95,7 @@ class BodyEquation:
         # The accelerometer's own offset (what it reads beyond the contact and air forces), the
         # intercept of the gain's regression, and the half-width of what it may still be off by.
         self._sensor_offset_mps2 = 0.0
-        self._sensor_offset_doubt_mps2 = UNLEARNT_ACCEL_TOLERANCE_MPS2
+        self._sensor_offset_doubt_mps2 = self.options.accel_offset_tolerance
         # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...
         self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
         self._recent_lag_nm = 0.0          # ... Σ T × what the pressure sensors' lag may hide (signed)
@@ -145,7 +145,8 @@ class BodyEquation:
     def accel_offset_doubt_mps2(self) -> float:
         """The standard error of the accelerometer offset learnt from free rolling so far (m/s²),
         the one the speed estimate takes off: 0 once learnt."""
-        return offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2) / math.sqrt(3.0)
+        return offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2,
+                                 self.options.accel_offset_tolerance) / math.sqrt(3.0)
 
     @property
     def wheel_torques_unknown(self) -> bool:
@@ -179,7 +180,8 @@ class BodyEquation:
             if self.options.level_road:
                 # (no grade: what free rolling taught is the sensor's own offset)
                 self._sensor_offset_mps2 = self._accel_bias_mps2
-                self._sensor_offset_doubt_mps2 = offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2)
+                self._sensor_offset_doubt_mps2 = offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2,
+                                                                   self.options.accel_offset_tolerance)
 
     def _update_brake_gain(
         self,
@@ -308,7 +310,7 @@ class BodyEquation:
         self._gain_sum_w = keep * self._gain_sum_w + 1.0
         gain, offset, doubt = gain_and_sensor_offset(
             self._gain_sum_tt, self._gain_sum_tn, self._gain_sum_t, self._gain_sum_n, self._gain_sum_w,
-            SENSOR_OFFSET_PRIOR_S / self.sample_period_s, mass_radius)
+            SENSOR_OFFSET_PRIOR_S / self.sample_period_s, mass_radius, opts.accel_offset_tolerance)
         self._sensor_offset_mps2, self._sensor_offset_doubt_mps2 = offset, doubt
         ambiguity = self._unlearnt_offset_torque_nm()
         if not 1.0 - lim <= gain <= 1.0 + lim:
@@ -388,22 +390,23 @@ class BodyEquation:
         self._lag_state = (s_bb, s_bd, s_dd, s_bn, s_dn, lag) + self._lag_state[6:]
 
 
-def offset_doubt_mps2(samples: int, sum_squares: float) -> float:
+def offset_doubt_mps2(samples: int, sum_squares: float, tolerance: float = UNLEARNT_ACCEL_TOLERANCE_MPS2) -> float:
     """How far the accelerometer offset learnt from `samples` free-rolling samples (their squared
     deviations summing to `sum_squares`) may be off, as the half-width of a uniform error of the
-    same σ as its standard error (√3 σ): at most `UNLEARNT_ACCEL_TOLERANCE_MPS2` (none learnt),
+    same σ as its standard error (√3 σ): at most the sensor's `tolerance` (none learnt),
     0 once learnt (`ACCEL_BIAS_LEARNT_SAMPLES`, as the brake check counts it). The samples'
     spread is 0.07–0.5 m/s² by car and sensors: three samples leave the offset 0.25 m/s² off,
     forty 0.01–0.03."""
     if samples >= ACCEL_BIAS_LEARNT_SAMPLES:
         return 0.0
     prior = ACCEL_BIAS_PRIOR_SAMPLES
-    variance = (sum_squares + prior * UNLEARNT_ACCEL_TOLERANCE_MPS2**2) / (max(samples - 1, 0) + prior)
-    return min(UNLEARNT_ACCEL_TOLERANCE_MPS2, math.sqrt(3.0 * variance / max(samples, 1)))
+    variance = (sum_squares + prior * tolerance**2) / (max(samples - 1, 0) + prior)
+    return min(tolerance, math.sqrt(3.0 * variance / max(samples, 1)))
 
 
 def gain_and_sensor_offset(sum_tt: float, sum_tn: float, sum_t: float, sum_n: float, sum_w: float,
-                           prior_samples: float, mass_radius: float) -> tuple[float, float, float]:
+                           prior_samples: float, mass_radius: float,
+                           tolerance: float = UNLEARNT_ACCEL_TOLERANCE_MPS2) -> tuple[float, float, float]:
     """The brake gain G and the accelerometer's offset s of N = G·T − M·R·s, the torque the body
     needs (from the raw accelerometer) against the torque the pressures give, fitted by least
     squares from the sums given (with the gain's prior in them) and a prior of s = 0 weighing like
@@ -414,9 +417,8 @@ def gain_and_sensor_offset(sum_tt: float, sum_tn: float, sum_t: float, sum_n: fl
     forces do not feel. Only a torque that varies through the stop (the pedal, an ABS's cycles)
     tells an offset, constant, from a gain, proportional: with a steady torque the prior stays,
     and the doubt with it. An offset within the sensor's tolerance is uniform a priori
-    (`UNLEARNT_ACCEL_TOLERANCE_MPS2` its half-width), the doubt that half-width times the
+    (`tolerance` its half-width, `frontend.accel_offset_tolerance`), the doubt that half-width times the
     posterior's share of the prior's standard deviation."""
-    tolerance = UNLEARNT_ACCEL_TOLERANCE_MPS2
     a11, a12, a22 = sum_tt, sum_t, sum_w + prior_samples
     det = a11 * a22 - a12 * a12
     if not (det > 0.0 and math.isfinite(det)):

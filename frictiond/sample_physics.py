@@ -53,7 +53,8 @@ class SamplePhysics:
             options.brake_gain_time_constant, options.max_slip, self._has_drive_torque, self._has_yaw_rate,
             float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation,
             options.accel_bias_settle_s, options.speed_correction_rate, options.speed_correction_hold_s,
-            vehicle.drag_area_doubt, vehicle.wind_doubt, options.level_road))
+            vehicle.drag_area_doubt, vehicle.wind_doubt, options.level_road,
+            options.accel_offset_tolerance))
 
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         t_c, omega, omega_dot, glitch = self._fit_wheels()

@@ -89,7 +89,8 @@ class BodyEquation:
         self._brake_gain_doubt = 0.0        # what the body equation leaves of its error (`gain_within_offset_ambiguity`)
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T·N
         self._gain_sum_t = self._gain_sum_n = self._gain_sum_w = 0.0       # Σ T, Σ N, Σ 1
-        # N as a pressure sensor with the learnt lag would read it (`_needed_as_sensed`), and when
+        # N as a pressure sensor with the learnt lag would read it (`_needed_as_sensed`), and the
+        # time of the sample it was last brought to
         self._sensed_needed_nm = math.nan
         self._sensed_needed_time_s = -math.inf
         # The accelerometer's own offset (what it reads beyond the contact and air forces), the
@@ -326,8 +327,9 @@ class BodyEquation:
         the pressures read, times the gain, less the offset's torque. The gain is fitted to the
         pressures as read against this, not to the pressures advanced by the lag (B + τ·Ḃ) against
         N: Ḃ is a difference of noisy readings, and noise in the regressor biases a least-squares
-        slope towards 0 (at a 36 ms lag, 0.25 bar of noise and an ABS from 157 km/h the gain came
-        out 0.94 for 1.05, the offset −0.43 m/s² for +0.30; the lag taken off N instead: 1.00).
+        slope towards 0 (at a 36 ms lag, 0.25 bar of noise and an ABS from 157 km/h a whole stop's
+        fit gave the gain 0.94 for 1.05 and the offset −0.43 m/s² for +0.30; the lag taken off N
+        instead, 1.00).
         Restarted from N after a gap in the samples the gain learns from."""
         lag, now = self._lag_state[5], self._lag_state[6]
         last, elapsed = self._sensed_needed_nm, now - self._sensed_needed_time_s

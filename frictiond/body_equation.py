@@ -164,6 +164,26 @@ class BodyEquation:
         """The pressure sensors' lag behind the brakes, as learnt from the body equation."""
         return self._lag_state[5]
 
+    def body_equation_note(self) -> str | None:
+        """What the body equation has learnt, for a user checking a car's config: the brake gain
+        against the configured one, the accelerometer's own offset and the pressure sensors' lag,
+        each with what it may still be off by; None before any braking taught it. An offset held
+        at its tolerance's edge is said so: the sensor may read further off than the config allows
+        (`frontend.accel_offset_tolerance`), or the pressures are off by a factor."""
+        level = self.options.level_road
+        if not self.options.brake_gain_correction or self._gain_sum_tt <= _BRAKE_GAIN_PRIOR_WEIGHT:
+            return None
+        tolerance = self.options.accel_offset_tolerance
+        offset, doubt = self._sensor_offset_mps2, self._sensor_offset_doubt_mps2
+        where = "free rolling's, level roads" if level else f"tolerance {tolerance:.2f}"
+        note = (f"brake gain {self._brake_gain_factor:.2f} ± {self._brake_gain_doubt:.2f} of the configured "
+                f"(pads, load); accelerometer offset {offset:+.2f} ± {doubt:.2f} m/s² ({where}); "
+                f"pressure lag {1e3 * self._lag_state[5]:.0f} ms")
+        if not level and abs(offset) >= tolerance and doubt >= tolerance:
+            note += (" — the offset at its tolerance's edge: a sensor reading further off (say so, "
+                     "frontend.accel_offset_tolerance) or pressures off by a factor")
+        return note
+
     def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float) -> None:
         # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
         # and, on a grade, gravity's share: what the speed estimate takes off, not the forces.

@@ -54,6 +54,8 @@ class ReplaySummary:
     measured_cycles: dict = field(default_factory=dict)
     # The pressure sensors too noisy for the usual ABS-release threshold, as a user is told.
     pressure_noise_note: str | None = None
+    # What the body equation learnt (`BodyEquation.body_equation_note`), None without braking.
+    body_equation_note: str | None = None
 
     @property
     def update_period_s(self) -> float:
@@ -102,6 +104,8 @@ class ReplaySummary:
                          + " (its wheels' speeds not known at their instants)")
         if self.pressure_noise_note:
             lines.append(f"pressure noise    {self.pressure_noise_note}")
+        if self.body_equation_note:
+            lines.append(f"body equation     {self.body_equation_note}")
         if self.relaxation_m > 0.0:
             lines.append(f"tyre lag          relaxation length {self.relaxation_m:.2f} m learnt from the μ–slip loops, "
                          "corrected before the fit")
@@ -161,7 +165,7 @@ def replay_frames(
         dict(pipeline.front_end.gate.counts), pipeline.front_end.gate.suspect_share(), pipeline.relaxation.sigma_m,
         dict(pipeline.wheel_join.dropped_by) if pipeline.wheel_join is not None else {},
         dict(pipeline.measured_cycle_times),
-        pipeline.front_end.pressure_noise_note(),
+        pipeline.front_end.pressure_noise_note(), pipeline.front_end.body_equation_note(),
     )
 
 

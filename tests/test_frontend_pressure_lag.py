@@ -138,3 +138,31 @@ def test_the_brake_gain_is_fitted_to_the_pressures_as_read_not_as_advanced():
     late = sorted(gains[len(gains) // 3:])
     assert len(late) > 100
     assert low - 0.04 <= late[len(late) // 10] and late[-len(late) // 10] <= high + 0.02
+
+
+def test_the_replay_summary_says_what_the_body_equation_learnt():
+    # A user checking a car's config reads the brake gain against the configured one, the
+    # accelerometer's offset and the pressure sensors' lag from `frictiond replay`: campaign stop
+    # 40133, brakes 4-11 % strong, sensors 36 ms late, an offset of +0.30 m/s² (at its tolerance;
+    # what a steady end of the stop leaves of the fit is +0.03 ± 0.25).
+    from frictiond.campaign.draw import draw_stop
+    from frictiond.campaign.simulate import simulate_stop
+    from frictiond.pipeline import Pipeline
+    from frictiond.replay import replay_frames
+
+    stop = simulate_stop(draw_stop(40133))
+    pipeline = Pipeline(stop.config("lugre-tr"))
+    assert pipeline.front_end.body_equation_note() is None          # (nothing braked yet)
+    summary = replay_frames(pipeline, stop.frames).format()
+    line = next(x for x in summary.splitlines() if x.startswith("body equation"))
+    gain = float(line.split("brake gain ")[1].split(" ")[0])
+    lag_ms = float(line.split("pressure lag ")[1].split(" ms")[0])
+    offset, doubt = (float(v) for v in line.split("offset ")[1].split(" m/s²")[0].split(" ± "))
+    assert 0.95 <= gain <= 1.12 and 30.0 <= lag_ms <= 45.0
+    fe = pipeline.front_end
+    assert (offset, doubt) == (round(fe._sensor_offset_mps2, 2), round(fe._sensor_offset_doubt_mps2, 2))
+    assert doubt < 0.3 and offset + doubt > 0.25
+    assert "edge" not in line
+    # held at its tolerance's edge by a body that asks for more, the line says what that may mean
+    fe._sensor_offset_mps2, fe._sensor_offset_doubt_mps2 = -0.3, 0.3
+    assert "accel_offset_tolerance" in fe.body_equation_note()

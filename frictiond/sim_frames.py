@@ -43,6 +43,7 @@ def simulate_frames(
     truth_model: str | None = None,
     reference_speed: bool | None = None,
     time_offset_s: float = 0.0,
+    grade: float | None = None,
 ) -> tuple[list[Frame], SimulationResult]:
     """Run one scenario and encode its sensor events as input frames of the config's DBC."""
     codec = input_codec_for(config)
@@ -53,6 +54,7 @@ def simulate_frames(
         seed=seed,
         truth_model=truth_model,
         reference_speed=reference_speed,
+        grade=grade,
     )
     return list(events_to_frames(codec, result.events, time_offset_s)), result
 

@@ -388,3 +388,41 @@ def test_load_factor_makes_the_true_car_heavier_than_the_configured_one():
         return sum(rows[5][f"fn_{w}"] for w in ("fl", "fr", "rl", "rr"))   # before braking
     assert static_load(light) == pytest.approx(config_mass * GRAVITY_MPS2, rel=0.02)
     assert static_load(heavy) == pytest.approx(1.25 * config_mass * GRAVITY_MPS2, rel=0.02)
+
+
+# ------------------------------------------------------------------ a road on a grade
+def test_a_grade_slows_the_car_by_gravity_s_share_the_accelerometer_does_not_read():
+    flat, up, down = run("snow", 0), run("snow", 0, grade=0.06), run("snow", 0, grade=-0.06)
+    share = GRAVITY_MPS2 * np.sin(np.arctan(0.06))
+    for r, sign in ((up, 1.0), (down, -1.0)):
+        t, v, ax = r.truth.time_s, r.truth["speed_mps"], r.truth["accel_long"]
+        # the speed changes by the accelerometer's reading less gravity's share along the road
+        dv = np.diff(v) / np.diff(t)
+        steady = slice(50, len(dv) - 50)
+        assert np.median(dv[steady] - ax[:-1][steady]) == pytest.approx(-sign * share, abs=0.03)
+    # free rolling alone: downhill the car gains speed, uphill it loses it
+    assert down.truth["speed_mps"][90] > flat.truth["speed_mps"][90] > up.truth["speed_mps"][90]
+    with pytest.raises(ValueError, match="grade"):
+        simulate("snow", VEH, SCHEDULES, grade=0.5)
+
+
+def test_a_grade_the_front_end_is_told_nothing_of_keeps_snow_right(default_config):
+    # The built-in simulator's snow stop on a 6 % grade either way. Free rolling teaches the
+    # accelerometer's offset with gravity's share (0.59 m/s², a quarter of snow's deceleration);
+    # the default front end takes the sensor's own offset from the brake gain's fit instead and
+    # stays right. A front end told the roads are level (`frontend.level_road`) takes gravity's
+    # share for brake torque: the premise, hundreds of VALID outputs more than 20 % off.
+    import dataclasses
+
+    from frictiond.evaluation import evaluate
+    from frictiond.replay import estimates_of
+    from frictiond.sim_frames import simulate_frames
+
+    level = dataclasses.replace(default_config, frontend=dataclasses.replace(default_config.frontend, level_road=True))
+    for grade in (0.06, -0.06):
+        frames, sim = simulate_frames(default_config, "snow", seed=2, grade=grade)
+        _, estimates = estimates_of(default_config, frames)
+        report = evaluate(estimates, sim.truth.rows())
+        assert report.false_valid_count == 0 and report.mae < 0.015 and report.valid_share > 0.9, grade
+        _, told_level = estimates_of(level, frames)
+        assert evaluate(told_level, sim.truth.rows()).false_valid_count > 100, grade

@@ -31,6 +31,8 @@ def add_subparser(subparsers: argparse._SubParsersAction) -> None:
                         help="add unrelated traffic filling this fraction of a 500 kbit/s bus")
     parser.add_argument("--start-time", type=float, default=0.0, metavar="S",
                         help="timestamp of the first frame (default 0; e.g. a wall-clock epoch)")
+    parser.add_argument("--grade", type=float, default=None, metavar="G",
+                        help="put the road on a grade, rise over run, uphill positive (e.g. -0.06)")
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
     parser.set_defaults(func=_do_simulate)
 
@@ -46,6 +48,10 @@ def _do_simulate(args: argparse.Namespace) -> int:
         return fail("simulate: --output LOG is required", 2)
     if not 0.0 <= args.background_load < 0.95:
         return fail("--background-load must be in [0, 0.95)", 2)
+    from ..simulator.scenarios import MAX_GRADE
+
+    if args.grade is not None and not abs(args.grade) <= MAX_GRADE:
+        return fail(f"--grade must lie within ±{MAX_GRADE:g}, not {args.grade}", 2)
     config = load_config_or_exit(args.config)
     from ..busio import LogFormatError, LogWriter
     from ..sim_frames import (
@@ -63,6 +69,7 @@ def _do_simulate(args: argparse.Namespace) -> int:
         truth_model=args.truth_model,
         reference_speed=args.reference_speed,
         time_offset_s=args.start_time,
+        grade=args.grade,
     )
     stream = iter(frames)
     if args.background_load > 0 and frames:

@@ -22,13 +22,15 @@ def simulate(
     seed: int = 0,
     truth_model: str | None = None,
     reference_speed: bool | None = None,
+    grade: float | None = None,
 ) -> SimulationResult:
     """Simulate one braking manoeuvre.
 
     `scenario` names an entry of `SCENARIOS` (or is a `Scenario`); `truth_model` overrides its
     tyre family ("burckhardt", "magic-formula", "lugre"); `reference_speed` None follows the
     scenario (default: no ground-speed sensor), False drops every message that carries only
-    `vehicle_speed_ref` (and that signal from mixed messages). Deterministic for a given seed;
+    `vehicle_speed_ref` (and that signal from mixed messages); `grade` (rise over run, uphill
+    positive) puts the scenario on a hill. Deterministic for a given seed;
     the physics does not depend on the schedules (separate random streams).
     """
     if isinstance(scenario, Scenario):
@@ -38,6 +40,8 @@ def simulate(
             scn = SCENARIOS[scenario]
         except KeyError:
             raise ValueError(f"unknown scenario {scenario!r}; choose from {', '.join(sorted(SCENARIOS))}") from None
+    if grade is not None:
+        scn = dataclasses.replace(scn, grade=float(grade))
     family = truth_model or scn.truth_model
     if family not in FAMILIES:
         raise ValueError(f"unknown truth tyre model {family!r}; choose from {', '.join(sorted(FAMILIES))}")

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from .tyres import FAMILIES, SURFACES
 
 Surfaces = tuple[str, str, str, str]
+MAX_GRADE = 0.3          # rise over run, either way (a very steep street is 0.2)
 
 
 def _all(surface: str) -> Surfaces:
@@ -49,6 +50,7 @@ class Scenario:
     drop_rate: float = 0.005               # probability that a frame is lost
     reference_speed: bool = False          # whether a ground-speed sensor is fitted
     load_factor: float = 1.0               # true mass / configured mass (passengers, luggage)
+    grade: float = 0.0                     # the road's rise over its run along the travel, uphill positive
 
     def __post_init__(self) -> None:
         if self.truth_model not in FAMILIES:
@@ -60,6 +62,8 @@ class Scenario:
             raise ValueError(f"scenario {self.name}: surfaces_after and surface_change_s go together")
         if not 0.5 <= self.load_factor <= 2.0:
             raise ValueError(f"scenario {self.name}: load_factor must lie within [0.5, 2]")
+        if not abs(self.grade) <= MAX_GRADE:
+            raise ValueError(f"scenario {self.name}: grade must lie within ±{MAX_GRADE:g}, not {self.grade!r}")
         if self.brake_start_s < 1.0:
             raise ValueError(f"scenario {self.name}: at least 1 s of free rolling before braking")
 

@@ -2,7 +2,9 @@
 
 Integrated at 1 kHz:
 
-- body: `M dv/dt = −Σ F_x,i − B_v v − D_a v²` along the path; in a constant-radius (left) turn the
+- body: `M dv/dt = −Σ F_x,i − B_v v − D_a v² − M g sin θ` along the path, θ the road's grade
+  (`Scenario.grade`, uphill positive), while the accelerometer (`Trace.ax`) reads the contact and
+  air forces over the mass, not gravity; the loads carry `g cos θ`. In a constant-radius (left) turn the
   yaw rate is `v/R_c`, the lateral acceleration `v²/R_c`, and wheel i's ground speed is
   `v ∓ ψ̇ d/2` (inner = left wheels slower);
 - loads: model.md's load transfer with forward-positive `a_x`, but driven by `a_x` through a
@@ -216,10 +218,9 @@ class _NormalLoads:
         self._wheelbase = veh.wheelbase
         self._track = np.array([veh.track_front, veh.track_front, veh.track_rear, veh.track_rear])
 
-    def __call__(self, a_lag: float, ay: float, roughness: np.ndarray) -> np.ndarray:
+    def __call__(self, a_lag: float, ay: float, roughness: np.ndarray, g: float = GRAVITY_MPS2) -> np.ndarray:
         veh = self._veh
         M = veh.mass
-        g = GRAVITY_MPS2
         l = self._wheelbase
         h = veh.cg_height
         front_axle = M * (g * veh.cg_to_rear_axle - h * a_lag) / l
@@ -272,6 +273,8 @@ def run_dynamics(scn: Scenario, vehicle: VehicleParams, family: str, rng: np.ran
 
     a_lag = 0.0
     ax = 0.0
+    slope = math.atan(scn.grade)
+    gravity_along, gravity_normal = GRAVITY_MPS2 * math.sin(slope), GRAVITY_MPS2 * math.cos(slope)
     z = np.zeros(4)
     x_travel = 0.0
     dyn = isinstance(surfaces.tyre, LugreDynamic)
@@ -284,7 +287,7 @@ def run_dynamics(scn: Scenario, vehicle: VehicleParams, family: str, rng: np.ran
         yaw, ay = _turn(v, curve)
         ground = v + _SIDE * yaw * half_track
         pd, tb = brakes.step(k, t, omega, ground, ax)
-        fn = normal_loads(a_lag, ay, rough[k])
+        fn = normal_loads(a_lag, ay, rough[k], gravity_normal)
         # tyre + wheel, semi-implicit in omega; in a turn on the load a turn leaves to braking
         fn_braking = fn * _longitudinal_share(surfaces.tyre, ground, ay) if ay else fn
         if dyn:
@@ -292,7 +295,8 @@ def run_dynamics(scn: Scenario, vehicle: VehicleParams, family: str, rng: np.ran
         else:
             omega_new, fx = _wheels_on_static_curve(surfaces.tyre, ground, omega, fn_braking, tb, R, J)
         omega_dot = (omega_new - omega) / DT_S
-        # body
+        # body: `ax` is what an accelerometer reads (the contact and air forces over the mass); on a
+        # grade the speed changes by gravity's share along the road too
         ax = (-float(np.sum(fx)) - veh.rolling_resistance * v - veh.drag_area_coefficient * v * v) / M
         # record the state at t with the forces acting over [t, t + dt]
         recorder.record(k, t, v, ax, ay, yaw, ground, omega, omega_dot, brakes.pressure, fx, fn, pd,
@@ -301,7 +305,7 @@ def run_dynamics(scn: Scenario, vehicle: VehicleParams, family: str, rng: np.ran
         # advance
         omega = omega_new
         x_travel += v * DT_S
-        v = v + ax * DT_S
+        v = v + (ax - gravity_along) * DT_S
         a_lag += (ax - a_lag) * (DT_S / PITCH_TIME_CONSTANT_S)
 
     return recorder.trace(n, surfaces.names, brakes.gains, R)

@@ -34,7 +34,8 @@ def default_config():
 @pytest.fixture(scope="session")
 def level_config(default_config):
     """The default config told that the roads are level (`FrontEndOptions.level_road`), as the
-    built-in simulator's are: free rolling then teaches the accelerometer's own offset."""
+    built-in simulator's scenarios are unless given a grade: free rolling then teaches the
+    accelerometer's own offset."""
     return dataclasses.replace(default_config, frontend=dataclasses.replace(default_config.frontend, level_road=True))
 
 

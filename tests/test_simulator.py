@@ -406,23 +406,20 @@ def test_a_grade_slows_the_car_by_gravity_s_share_the_accelerometer_does_not_rea
         simulate("snow", VEH, SCHEDULES, grade=0.5)
 
 
-def test_a_grade_the_front_end_is_told_nothing_of_keeps_snow_right(default_config):
+def test_a_grade_the_front_end_is_told_nothing_of_keeps_snow_right(default_config, level_config):
     # The built-in simulator's snow stop on a 6 % grade either way. Free rolling teaches the
     # accelerometer's offset with gravity's share (0.59 m/s², a quarter of snow's deceleration);
     # the default front end takes the sensor's own offset from the brake gain's fit instead and
     # stays right. A front end told the roads are level (`frontend.level_road`) takes gravity's
     # share for brake torque: the premise, hundreds of VALID outputs more than 20 % off.
-    import dataclasses
-
     from frictiond.evaluation import evaluate
     from frictiond.replay import estimates_of
     from frictiond.sim_frames import simulate_frames
 
-    level = dataclasses.replace(default_config, frontend=dataclasses.replace(default_config.frontend, level_road=True))
     for grade in (0.06, -0.06):
         frames, sim = simulate_frames(default_config, "snow", seed=2, grade=grade)
         _, estimates = estimates_of(default_config, frames)
         report = evaluate(estimates, sim.truth.rows())
         assert report.false_valid_count == 0 and report.mae < 0.015 and report.valid_share > 0.9, grade
-        _, told_level = estimates_of(level, frames)
+        _, told_level = estimates_of(level_config, frames)
         assert evaluate(told_level, sim.truth.rows()).false_valid_count > 100, grade

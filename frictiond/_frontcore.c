@@ -480,7 +480,7 @@ enum {
     K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
     K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_MASTER_ONLY, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
     K_LAG_COMPENSATION, K_BIAS_SETTLE, K_CORRECTION_RATE, K_CORRECTION_HOLD, K_DRAG_DOUBT, K_WIND_DOUBT, K_LEVEL_ROAD,
-    K_ACCEL_TOLERANCE, K_COUNT
+    K_ACCEL_TOLERANCE, K_COASTING_OFFSET, K_COUNT
 };
 
 #define MAX_ABS_ACCEL 30.0
@@ -516,7 +516,8 @@ static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_samp
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn, *A_gain_t, *A_gain_n,
     *A_gain_w, *A_sensed_needed, *A_sensed_needed_time, *A_sensor_offset, *A_sensor_offset_doubt,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_gain_doubt, *A_model_holds, *A_released,
-    *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_restarted_braking;
+    *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_restarted_braking, *A_rolling_offset,
+    *A_rolling_samples, *A_rolling_m2, *A_rolling_air;
 
 typedef struct {
     long repeats[NW];
@@ -525,8 +526,8 @@ typedef struct {
     double low_since[NW], low_unbraked[NW];
     int has_last_sample, has_speed_time, has_speed_est, has_faster_since, restarted_braking;
     double last_sample, bias, unexplained, speed_time, speed_est, slipping_time, faster_since;
-    long bias_samples, ref_disagreements;
-    double bias_m2;
+    long bias_samples, ref_disagreements, rolling_samples;
+    double bias_m2, rolling_offset, rolling_m2, rolling_air;
     double sensed_needed, sensed_needed_time;
     double gain_tt, gain_tn, gain_t, gain_n, gain_w, sensor_offset, sensor_offset_doubt, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor, gain_doubt;
     double unjudged;
@@ -610,6 +611,10 @@ static int load_state(PyObject *fe, FEState *s)
     if (get_float_attr(fe, A_last_sample, &s->last_sample, &s->has_last_sample) < 0
         || get_float_attr(fe, A_bias, &s->bias, NULL) < 0 || get_long_attr(fe, A_bias_samples, &s->bias_samples) < 0
         || get_float_attr(fe, A_bias_m2, &s->bias_m2, NULL) < 0
+        || get_float_attr(fe, A_rolling_offset, &s->rolling_offset, NULL) < 0
+        || get_long_attr(fe, A_rolling_samples, &s->rolling_samples) < 0
+        || get_float_attr(fe, A_rolling_m2, &s->rolling_m2, NULL) < 0
+        || get_float_attr(fe, A_rolling_air, &s->rolling_air, NULL) < 0
         || get_float_attr(fe, A_slipping_time, &s->slipping_time, NULL) < 0
         || get_float_attr(fe, A_unexplained, &s->unexplained, NULL) < 0
         || get_float_attr(fe, A_speed_time, &s->speed_time, &s->has_speed_time) < 0
@@ -695,6 +700,10 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_bias, PyFloat_FromDouble(s->bias)) < 0
         || set_attr_new(fe, A_bias_samples, PyLong_FromLong(s->bias_samples)) < 0
         || set_attr_new(fe, A_bias_m2, PyFloat_FromDouble(s->bias_m2)) < 0
+        || set_attr_new(fe, A_rolling_offset, PyFloat_FromDouble(s->rolling_offset)) < 0
+        || set_attr_new(fe, A_rolling_samples, PyLong_FromLong(s->rolling_samples)) < 0
+        || set_attr_new(fe, A_rolling_m2, PyFloat_FromDouble(s->rolling_m2)) < 0
+        || set_attr_new(fe, A_rolling_air, PyFloat_FromDouble(s->rolling_air)) < 0
         || set_attr_new(fe, A_slipping_time, PyFloat_FromDouble(s->slipping_time)) < 0
         || set_attr_new(fe, A_unexplained, PyFloat_FromDouble(s->unexplained)) < 0
         || set_attr_new(fe, A_speed_time, float_or_none(s->has_speed_time, s->speed_time)) < 0
@@ -894,20 +903,40 @@ static double offset_doubt(long samples, double sum_squares, double tolerance)
     return py_min(tolerance, sqrt(3.0 * variance / (double)(samples > 1 ? samples : 1)));
 }
 
-/* body_equation.gain_and_sensor_offset: the brake gain (returned) and the accelerometer's offset
- * (*offset) of N = G·T − M·R·s by least squares with a prior of s = 0, and what s may be off by. */
-static double gain_and_sensor_offset(const FEState *s, double prior_samples, double mass_radius, double tolerance,
-                                     double *offset, double *doubt)
+/* body_equation.BodyEquation.rolling_offset_prior: free rolling's offset (*mean) and its
+ * half-width (returned). */
+static double rolling_offset_prior(const FEState *s, const double *k, double *mean)
 {
-    const double a11 = s->gain_tt, a12 = s->gain_t, a22 = s->gain_w + prior_samples;
+    const double tolerance = k[K_ACCEL_TOLERANCE];
+    *mean = 0.0;
+    if (s->rolling_samples == 0)
+        return tolerance;
+    const double remembered = py_min((double)s->rolling_samples, py_max(k[K_BIAS_TAU], 1e-3) / k[K_SAMPLE_PERIOD]);
+    const double variance = (s->rolling_m2 + ACCEL_BIAS_PRIOR_SAMPLES * tolerance * tolerance)
+                            / ((double)(s->rolling_samples > 1 ? s->rolling_samples - 1 : 0) + ACCEL_BIAS_PRIOR_SAMPLES);
+    const double width = sqrt(3.0 * variance / remembered) + s->rolling_air;
+    *mean = py_min(py_max(s->rolling_offset, -tolerance), tolerance);
+    return py_min(tolerance, py_max(BODY_ACCEL_TOLERANCE, width));
+}
+
+/* body_equation.gain_and_sensor_offset: the brake gain (returned) and the accelerometer's offset
+ * (*offset) of N = G·T − M·R·s by least squares with a prior of s = prior_offset (half-width
+ * prior_width), and what s may be off by. */
+static double gain_and_sensor_offset(const FEState *s, double prior_samples, double mass_radius, double tolerance,
+                                     double prior_offset, double prior_width, double *offset, double *doubt)
+{
+    const double width = py_min(py_max(prior_width, 1e-6), tolerance);
+    const double weight = prior_samples * (tolerance / width) * (tolerance / width);
+    const double a11 = s->gain_tt, a12 = s->gain_t, a22 = s->gain_w + weight;
     const double det = a11 * a22 - a12 * a12;
     if (!(det > 0.0 && isfinite(det))) {
-        *offset = 0.0;
-        *doubt = tolerance;
+        *offset = prior_offset;
+        *doubt = width;
         return s->gain_tn / s->gain_tt;
     }
-    const double fit = -(a11 * s->gain_n - a12 * s->gain_tn) / det / mass_radius;
-    const double spread = tolerance * sqrt(py_min(1.0, prior_samples * a11 / det));
+    const double sum_n = s->gain_n - weight * mass_radius * prior_offset;
+    const double fit = -(a11 * sum_n - a12 * s->gain_tn) / det / mass_radius;
+    const double spread = width * sqrt(py_min(1.0, weight * a11 / det));
     if (fabs(fit) > tolerance) {
         *offset = copysign(tolerance, fit);
         *doubt = tolerance;
@@ -944,6 +973,31 @@ static double unexplained_torque(const FEState *s, double low, double high)
     if (mean_needed < low * mean_brake)
         return low * mean_brake - mean_needed - py_max(-lag_explains, 0.0);
     return 0.0;
+}
+
+/* body_equation.BodyEquation._learn_rolling_offset */
+static void learn_rolling_offset(FEState *s, const double *k, double speed, const double *omega_dot, double a_raw,
+                                 const double *drive)
+{
+    const double mass_radius = k[K_MASS] * k[K_RADIUS];
+    const double torque = k[K_INERTIA] * sum_of(omega_dot, NW) - sum_of(drive, NW);
+    const double resistance = k[K_ROLLING] * speed + k[K_DRAG] * speed * speed;
+    const double offset = a_raw + resistance / k[K_MASS] + torque / mass_radius;
+    if (!(isfinite(offset) && fabs(offset) <= SENSOR_OFFSET_LIMIT))
+        return;
+    const double wind = py_max(k[K_WIND_DOUBT], FAULT_WIND), air = speed + wind;
+    const double air_doubt = (k[K_DRAG_DOUBT] * air * air + k[K_DRAG] * wind * (speed + air)) / k[K_MASS];
+    s->rolling_samples += 1;
+    const double alpha = py_max(py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_BIAS_TAU], 1e-3)),
+                                1.0 / (double)s->rolling_samples);
+    const double before = s->rolling_offset;
+    s->rolling_offset += alpha * (offset - before);
+    s->rolling_m2 += (offset - before) * (offset - s->rolling_offset);
+    s->rolling_air += alpha * (air_doubt - s->rolling_air);
+    double prior_offset;
+    const double prior_width = rolling_offset_prior(s, k, &prior_offset);
+    gain_and_sensor_offset(s, SENSOR_OFFSET_PRIOR_S / k[K_SAMPLE_PERIOD], mass_radius, k[K_ACCEL_TOLERANCE],
+                           prior_offset, prior_width, &s->sensor_offset, &s->sensor_offset_doubt);
 }
 
 /* FrontEnd._update_brake_gain */
@@ -1024,8 +1078,11 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
             s->gain_t = keep * s->gain_t + raw_brake;
             s->gain_n = keep * s->gain_n + n;
             s->gain_w = keep * s->gain_w + 1.0;
+            double prior_offset;
+            const double prior_width = rolling_offset_prior(s, k, &prior_offset);
             gain = gain_and_sensor_offset(s, SENSOR_OFFSET_PRIOR_S / k[K_SAMPLE_PERIOD], mass_radius,
-                                          k[K_ACCEL_TOLERANCE], &s->sensor_offset, &s->sensor_offset_doubt);
+                                          k[K_ACCEL_TOLERANCE], prior_offset, prior_width, &s->sensor_offset,
+                                          &s->sensor_offset_doubt);
         }
         /* (body_equation.BodyEquation._unlearnt_offset_torque_nm) */
         const double doubt = s->sensor_offset_doubt;
@@ -1221,6 +1278,8 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
                 s.sensor_offset_doubt = offset_doubt(s.bias_samples, s.bias_m2, k[K_ACCEL_TOLERANCE]);
             }
         }
+        if (k[K_LEVEL_ROAD] == 0.0 && k[K_GAIN_CORRECTION] != 0.0 && k[K_COASTING_OFFSET] != 0.0)
+            learn_rolling_offset(&s, k, speed, omega_dot, a_raw, drive);
     }
     double yaw_rate = 0.0;
     int have_yaw = 0;
@@ -1338,7 +1397,9 @@ static int intern_attributes(void)
     struct { PyObject **slot; const char *name; } names[] = {
         {&A_repeats, "_repeats"}, {&A_dead, "_dead"}, {&A_low_since, "_low_since_s"},
         {&A_low_unbraked, "_low_unbraked_s"}, {&A_last_sample, "_last_sample_time_s"}, {&A_bias, "_accel_bias_mps2"},
-        {&A_bias_samples, "_accel_bias_samples"}, {&A_bias_m2, "_accel_bias_m2"}, {&A_unexplained, "_unexplained_s"},
+        {&A_bias_samples, "_accel_bias_samples"}, {&A_bias_m2, "_accel_bias_m2"},
+        {&A_rolling_offset, "_rolling_offset_mps2"}, {&A_rolling_samples, "_rolling_offset_samples"},
+        {&A_rolling_m2, "_rolling_offset_m2"}, {&A_rolling_air, "_rolling_air_doubt_mps2"}, {&A_unexplained, "_unexplained_s"},
         {&A_speed_time, "_speed_time_s"}, {&A_speed_est, "_speed_estimate_mps"},
         {&A_ref_disagreements, "_ref_disagreements"}, {&A_gain_tt, "_gain_sum_tt"}, {&A_gain_tn, "_gain_sum_tn"},
         {&A_gain_t, "_gain_sum_t"}, {&A_gain_n, "_gain_sum_n"}, {&A_gain_w, "_gain_sum_w"},

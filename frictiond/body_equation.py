@@ -72,7 +72,8 @@ LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
                  "_brake_gain_doubt",
                  "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_accel_bias_m2",
-                 "_lag_state", "_resistance_doubt_sum_n", "_tyre_force_sum_n")
+                 "_lag_state", "_resistance_doubt_sum_n", "_tyre_force_sum_n",
+                 "_rolling_offset_mps2", "_rolling_offset_samples", "_rolling_offset_m2", "_rolling_air_doubt_mps2")
 
 
 class BodyEquation:
@@ -97,6 +98,12 @@ class BodyEquation:
         # intercept of the gain's regression, and the half-width of what it may still be off by.
         self._sensor_offset_mps2 = 0.0
         self._sensor_offset_doubt_mps2 = self.options.accel_offset_tolerance
+        # The same offset as free rolling's body equation gives it (`_learn_rolling_offset`): its
+        # mean, samples, Σ squared deviations, and the mean of what the air's drag may be off by.
+        self._rolling_offset_mps2 = 0.0
+        self._rolling_offset_samples = 0
+        self._rolling_offset_m2 = 0.0
+        self._rolling_air_doubt_mps2 = 0.0
         # Over ~0.2 s of braking: Σ brake torque T, Σ T × torque the body needed, Σ T², ...
         self._recent_weight_nm = self._recent_needed_nm = self._recent_brake_nm = 0.0
         self._recent_lag_nm = 0.0          # ... Σ T × what the pressure sensors' lag may hide (signed)
@@ -203,6 +210,57 @@ class BodyEquation:
                 self._sensor_offset_mps2 = self._accel_bias_mps2
                 self._sensor_offset_doubt_mps2 = offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2,
                                                                    self.options.accel_offset_tolerance)
+
+    def _learn_rolling_offset(self, speed: float, omega_dot: list[float], accel_long_raw: float,
+                              drive: list[float]) -> None:
+        """The accelerometer's own offset from a free-rolling sample of the body equation: with no
+        brake torque, what it reads beyond the air's drag and the wheels' inertia and drive torques.
+        Gravity along a grade is no contact force, so unlike `_learn_accel_bias` this is the sensor's
+        offset alone; and a resistance the config does not know (rolling, the drivetrain's drag) is
+        in it as it is in every braking sample, the intercept of `gain_and_sensor_offset`'s fit.
+        Braking alone tells that intercept only from how its torque varies (a steady stop on snow:
+        not at all). Then the offset's doubt (`rolling_offset_prior`)."""
+        opts, veh = self.options, self.vehicle
+        if opts.level_road or not opts.brake_gain_correction or not opts.coasting_offset:
+            return
+        mass_radius = veh.mass * veh.wheel_radius
+        torque = veh.wheel_inertia * sum(omega_dot) - sum(drive)
+        offset = accel_long_raw + veh.resistance_force(speed) / veh.mass + torque / mass_radius
+        if not (math.isfinite(offset) and abs(offset) <= SENSOR_OFFSET_LIMIT_MPS2):
+            return
+        # What the drag the config gives may be off by at this speed, a breeze at least: braking
+        # at other speeds meets another drag error, which the intercept cannot hold.
+        wind = max(veh.wind_doubt, FAULT_WIND_MPS)
+        air = speed + wind
+        air_doubt = (veh.drag_area_doubt * air * air + veh.drag_area_coefficient * wind * (speed + air)) / veh.mass
+        self._rolling_offset_samples += 1
+        alpha = max(min(1.0, self.sample_period_s / max(opts.accel_bias_time_constant, 1e-3)),
+                    1.0 / self._rolling_offset_samples)
+        before = self._rolling_offset_mps2
+        self._rolling_offset_mps2 += alpha * (offset - before)
+        self._rolling_offset_m2 += (offset - before) * (offset - self._rolling_offset_mps2)
+        self._rolling_air_doubt_mps2 += alpha * (air_doubt - self._rolling_air_doubt_mps2)
+        fit = gain_and_sensor_offset(
+            self._gain_sum_tt, self._gain_sum_tn, self._gain_sum_t, self._gain_sum_n, self._gain_sum_w,
+            SENSOR_OFFSET_PRIOR_S / self.sample_period_s, mass_radius, opts.accel_offset_tolerance,
+            *self.rolling_offset_prior())
+        self._sensor_offset_mps2, self._sensor_offset_doubt_mps2 = fit[1:]
+
+    def rolling_offset_prior(self) -> tuple[float, float]:
+        """What free rolling's body equation says of the accelerometer's offset before braking
+        weighs in: its mean and the half-width of its error (its samples' standard error and the
+        drag's doubt, at least `BODY_ACCEL_TOLERANCE_MPS2`), both within the sensor's tolerance;
+        (0, the tolerance) before any free rolling."""
+        tolerance = self.options.accel_offset_tolerance
+        samples = self._rolling_offset_samples
+        if samples == 0:
+            return 0.0, tolerance
+        remembered = min(float(samples), max(self.options.accel_bias_time_constant, 1e-3) / self.sample_period_s)
+        prior = ACCEL_BIAS_PRIOR_SAMPLES
+        variance = (self._rolling_offset_m2 + prior * tolerance**2) / (max(samples - 1, 0) + prior)
+        width = math.sqrt(3.0 * variance / remembered) + self._rolling_air_doubt_mps2
+        width = min(tolerance, max(BODY_ACCEL_TOLERANCE_MPS2, width))
+        return min(max(self._rolling_offset_mps2, -tolerance), tolerance), width
 
     def _update_brake_gain(
         self,
@@ -331,7 +389,8 @@ class BodyEquation:
         self._gain_sum_w = keep * self._gain_sum_w + 1.0
         gain, offset, doubt = gain_and_sensor_offset(
             self._gain_sum_tt, self._gain_sum_tn, self._gain_sum_t, self._gain_sum_n, self._gain_sum_w,
-            SENSOR_OFFSET_PRIOR_S / self.sample_period_s, mass_radius, opts.accel_offset_tolerance)
+            SENSOR_OFFSET_PRIOR_S / self.sample_period_s, mass_radius, opts.accel_offset_tolerance,
+            *self.rolling_offset_prior())
         self._sensor_offset_mps2, self._sensor_offset_doubt_mps2 = offset, doubt
         ambiguity = self._unlearnt_offset_torque_nm()
         if not 1.0 - lim <= gain <= 1.0 + lim:
@@ -428,7 +487,8 @@ def offset_doubt_mps2(samples: int, sum_squares: float, tolerance: float = UNLEA
 
 def gain_and_sensor_offset(sum_tt: float, sum_tn: float, sum_t: float, sum_n: float, sum_w: float,
                            prior_samples: float, mass_radius: float,
-                           tolerance: float = UNLEARNT_ACCEL_TOLERANCE_MPS2) -> tuple[float, float, float]:
+                           tolerance: float = UNLEARNT_ACCEL_TOLERANCE_MPS2, prior_offset: float = 0.0,
+                           prior_width: float | None = None) -> tuple[float, float, float]:
     """The brake gain G and the accelerometer's offset s of N = G·T − M·R·s, the torque the body
     needs (from the raw accelerometer) against the torque the pressures give, fitted by least
     squares from the sums given (with the gain's prior in them) and a prior of s = 0 weighing like
@@ -441,12 +501,15 @@ def gain_and_sensor_offset(sum_tt: float, sum_tn: float, sum_t: float, sum_n: fl
     and the doubt with it. An offset within the sensor's tolerance is uniform a priori
     (`tolerance` its half-width, `frontend.accel_offset_tolerance`), the doubt that half-width times the
     posterior's share of the prior's standard deviation."""
-    a11, a12, a22 = sum_tt, sum_t, sum_w + prior_samples
+    width = tolerance if prior_width is None else min(max(prior_width, 1e-6), tolerance)
+    weight = prior_samples * (tolerance / width) ** 2
+    a11, a12, a22 = sum_tt, sum_t, sum_w + weight
     det = a11 * a22 - a12 * a12
     if not (det > 0.0 and math.isfinite(det)):
-        return sum_tn / sum_tt, 0.0, tolerance
+        return sum_tn / sum_tt, prior_offset, width
+    sum_n -= weight * mass_radius * prior_offset
     offset = -(a11 * sum_n - a12 * sum_tn) / det / mass_radius
-    doubt = tolerance * math.sqrt(min(1.0, prior_samples * a11 / det))
+    doubt = width * math.sqrt(min(1.0, weight * a11 / det))
     # No sensor reads beyond its tolerance: what the fit allows within it (the middle, and the
     # half-width), and the gain that offset leaves. A steady torque lets the gain's prior pull the
     # offset anywhere (a pressure reading 2.5 times the brakes' on ice fitted an offset of 0.25

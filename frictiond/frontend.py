@@ -127,6 +127,12 @@ class FrontEndOptions:
     # fits. An offset beyond it is read as brake gain: on the campaign's dev stops an offset of
     # 0.4 put 2.3 % of the VALID outputs more than 20 % off (0.27 % as drawn, ≤ 0.3).
     accel_offset_tolerance: float = UNLEARNT_ACCEL_TOLERANCE_MPS2
+    # Free rolling (no brake pressure, no drive torque sent) is coasting: the accelerometer then
+    # reads the air's drag and the car's resistance only, and tells its own offset, gravity's
+    # share on a grade not read (`_learn_rolling_offset`). A car driven under power that does not
+    # send its drive torques (WHEEL_DRIVE_TORQUE; absent means none) must set it false: its
+    # engine's push would pass for the offset.
+    coasting_offset: bool = True
 
 
     def validate(self) -> None:

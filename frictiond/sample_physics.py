@@ -54,7 +54,7 @@ class SamplePhysics:
             float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation,
             options.accel_bias_settle_s, options.speed_correction_rate, options.speed_correction_hold_s,
             vehicle.drag_area_doubt, vehicle.wind_doubt, options.level_road,
-            options.accel_offset_tolerance))
+            options.accel_offset_tolerance, options.coasting_offset))
 
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         t_c, omega, omega_dot, glitch = self._fit_wheels()
@@ -98,7 +98,7 @@ class SamplePhysics:
         if self._deceleration_unexplained(t_c, braking or driving, accel_contact, omega_dot, max(wheel_linear)):
             return FrontEndResult(None, stale, "brake pressure implausible")
         speed, from_ref = self._speed_and_offset(t_c, wheel_linear, omega_dot, accel_long, accel_long_raw,
-                                                 braking or driving)
+                                                 braking or driving, drive)
 
         yaw_rate = inputs[-1] if self._has_yaw_rate else None
         if yaw_rate is None or not math.isfinite(yaw_rate):
@@ -194,7 +194,8 @@ class SamplePhysics:
         ]
 
     def _speed_and_offset(self, t_c: float, wheel_linear: list[float], omega_dot: list[float],
-                          accel_long: float, accel_long_raw: float, torqued: bool) -> tuple[float, bool]:
+                          accel_long: float, accel_long_raw: float, torqued: bool,
+                          drive: list[float]) -> tuple[float, bool]:
         """The ground speed (and whether from the car's reference) after this sample; while the
         wheels roll free, settled since their last braked slip, the accelerometer's offset learnt."""
         # No pressure is not yet free rolling: wheels released by the ABS (pressure below the
@@ -209,6 +210,7 @@ class SamplePhysics:
         speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
         if free_rolling and t_c - self._slipping_time_s >= self.options.accel_bias_settle_s:
             self._learn_accel_bias(t_c, omega_dot, accel_long_raw)
+            self._learn_rolling_offset(speed, omega_dot, accel_long_raw, drive)
         return speed, from_ref
 
     def _slips(self, speed: float, yaw_rate: float, wheel_linear: list[float]) -> list[float]:

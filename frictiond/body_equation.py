@@ -173,8 +173,9 @@ class BodyEquation:
 
     def body_equation_note(self) -> str | None:
         """What the body equation has learnt, for a user checking a car's config: the brake gain
-        against the configured one, the accelerometer's own offset and the pressure sensors' lag,
-        each with what it may still be off by; None before any braking taught it. An offset held
+        against the configured one, the accelerometer's own offset (and what coasting showed of it)
+        and the pressure sensors' lag, each with what it may still be off by; None before any
+        braking taught it. An offset held
         at its tolerance's edge is said so: the sensor may read further off than the config allows
         (`frontend.accel_offset_tolerance`), or the pressures are off by a factor."""
         level = self.options.level_road
@@ -183,6 +184,9 @@ class BodyEquation:
         tolerance = self.options.accel_offset_tolerance
         offset, doubt = self._sensor_offset_mps2, self._sensor_offset_doubt_mps2
         where = "free rolling's, level roads" if level else f"tolerance {tolerance:.2f}"
+        if not level and self._rolling_offset_samples:
+            shown, width = self.rolling_offset_prior()
+            where += f"; coasting showed {shown:+.2f} ± {width:.2f}"
         note = (f"brake gain {self._brake_gain_factor:.2f} ± {self._brake_gain_doubt:.2f} of the configured "
                 f"(pads, load); accelerometer offset {offset:+.2f} ± {doubt:.2f} m/s² ({where}); "
                 f"pressure lag {1e3 * self._lag_state[5]:.0f} ms")

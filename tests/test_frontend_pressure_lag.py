@@ -163,6 +163,10 @@ def test_the_replay_summary_says_what_the_body_equation_learnt():
     assert (offset, doubt) == (round(fe._sensor_offset_mps2, 2), round(fe._sensor_offset_doubt_mps2, 2))
     assert doubt < 0.3 and offset + doubt > 0.25
     assert "edge" not in line
+    # (and what coasting showed of it, before the brakes: the prior of that fit)
+    shown, width = (float(v) for v in line.split("coasting showed ")[1].split(")")[0].split(" ± "))
+    assert (shown, width) == tuple(round(x, 2) for x in fe.rolling_offset_prior())
+    assert abs(shown - 0.30) <= width < 0.15     # (157 km/h: a breeze's drag is 0.1 m/s² of it)
     # held at its tolerance's edge by a body that asks for more, the line says what that may mean
     fe._sensor_offset_mps2, fe._sensor_offset_doubt_mps2 = -0.3, 0.3
     assert "accel_offset_tolerance" in fe.body_equation_note()

@@ -237,7 +237,8 @@ PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_
                  "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_gain_sum_w",
                  "_sensor_offset_mps2", "_sensor_offset_doubt_mps2", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_brake_released", "_brake_gain_factor", "_brake_gain_doubt", "_brake_model_holds",
-                 "_unjudged_s", "_lag_state", "_slipping_time_s")
+                 "_unjudged_s", "_lag_state", "_slipping_time_s", "_rolling_offset_mps2", "_rolling_offset_samples",
+                 "_rolling_offset_m2", "_rolling_air_doubt_mps2")
 
 
 def _physics_stream(seed: int, steps: int):
@@ -333,6 +334,8 @@ def test_sample_physics_is_compute_sample_on_every_branch(seed, level_road):
     assert samples > 1000 and 0 < from_ref < samples and dead > 5
     assert 0 < doubted < samples    # (braking before the accelerometer's offset was learnt, and after)
     assert lag > 0.002    # (the pressure-lag compensation was at work, not only its zero)
+    # (coasting taught the offset's prior, unless the roads are level)
+    assert (compiled._rolling_offset_samples > 10) != level_road
 
 
 @needs_core

@@ -2,9 +2,9 @@
 
     .venv/bin/python benchmarks/campaign.py [--stops 1000] [--set held-out|dev|both] [--workers N]
         [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--clean-sensors] [--pre-roll S] [--grade G]
-        [--payload KG] [--accel-offset A] [--save FILE.json|.parquet] [--worst 15]
+        [--payload KG] [--accel-offset A] [--cruise-lift S] [--save FILE.json|.parquet] [--worst 15]
     .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--clean-sensors] [--pre-roll S]
-        [--grade G] [--payload KG] [--accel-offset A] [--write-log DIR]
+        [--grade G] [--payload KG] [--accel-offset A] [--cruise-lift S] [--write-log DIR]
 
 Each stop is drawn from its seed (`frictiond.campaign.draw`, ranges in its docstring): a car,
 tyres (Burckhardt or Magic Formula, never the estimator's LuGre), an ABS family, sensors and a
@@ -22,7 +22,10 @@ stop on a grade of G (rise over run, uphill positive) in place of the one it dre
 rolling teaches of the accelerometer then holds gravity's share along the road. `--payload KG`
 puts KG aboard every car (the config knows none of it; drawn: 0–120 kg) and `--accel-offset A`
 gives every accelerometer an offset of size A (its drawn sign kept; drawn: 0–0.3 m/s²): a loaded
-car, a sensor mounted tilted, beyond the ranges the estimator was tuned on.
+car, a sensor mounted tilted, beyond the ranges the estimator was tuned on. `--cruise-lift S`
+drives every car at a steady speed, with no drive torque on the bus, until S seconds before its
+brakes, where the draw has it coast: the engine's push then reads like an accelerometer offset to
+what coasting teaches (`frontend.coasting_offset`).
 Printed: the issue's targets with PASS/FAIL per estimator, the comparison, a table per family,
 distributions, and the worst stops each with the command that reproduces it.
 """
@@ -89,6 +92,9 @@ def main(argv: list[str] | None = None) -> int:
                         "beyond its configured mass (default: drawn, 0-120 kg)")
     parser.add_argument("--accel-offset", type=float, default=None, metavar="A", help="every accelerometer's "
                         "offset this large, m/s², its drawn sign kept (default: drawn, 0-0.3)")
+    parser.add_argument("--cruise-lift", type=float, default=None, metavar="S", help="every car driven at a "
+                        "steady speed, no drive torque on the bus, until S seconds before the brakes "
+                        "(default: it coasts)")
     parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
     parser.add_argument("--worst", type=int, default=15)
     parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
@@ -96,10 +102,12 @@ def main(argv: list[str] | None = None) -> int:
                         "configs, truth CSV")
     args = parser.parse_args(argv)
     try:
-        stress = Stress(args.clean_sensors, args.pre_roll, args.grade, args.payload, args.accel_offset)
+        stress = Stress(args.clean_sensors, args.pre_roll, args.grade, args.payload, args.accel_offset,
+                        args.cruise_lift)
     except ValueError as exc:
         parser.error(str(exc).replace("pre_roll_s", "--pre-roll").replace("payload_kg", "--payload")
-                     .replace("accel_offset_mps2", "--accel-offset").replace("grade", "--grade"))
+                     .replace("accel_offset_mps2", "--accel-offset").replace("grade", "--grade")
+                     .replace("cruise_lift_s", "--cruise-lift"))
     if args.reproduce is not None:
         return reproduce(args.reproduce, args.family, args.write_log, stress)
     sets = ("dev", "held-out") if args.which == "both" else (args.which,)

@@ -484,3 +484,25 @@ def test_a_stop_set_loaded_or_with_a_tilted_accelerometer_is_the_same_stop_other
     assert stress.describe() == ", 400 kg aboard, accelerometer offset ±0.45 m/s²"
     rows = run_campaign([5], workers=0, stress=stress)
     assert rows[0]["payload_kg"] == 400.0 and rows[0]["accel_offset"] == round(math.copysign(0.45, drawn), 3)
+
+
+def test_a_stop_set_to_cruise_is_driven_until_the_driver_lifts():
+    # `--cruise-lift S`: the pre-roll driven at a steady speed (the engine's force holding off the
+    # drag, no drive torque on the bus) until S before the brakes, where the draw has it coast.
+    spec = draw_stop(3, grade=0.0)
+    cruising = draw_stop(3, grade=0.0, cruise_lift_s=0.3)
+    assert cruising.driven_until_s == pytest.approx(spec.pre_roll_s - 0.3)
+    assert dataclasses.replace(cruising, driven_until_s=None) == spec
+    with pytest.raises(ValueError, match="cruise_lift_s"):
+        draw_stop(3, cruise_lift_s=-0.1)
+    stress = Stress(cruise_lift_s=0.3)
+    assert " --cruise-lift 0.3 " in reproduce_command({"seed": 3}, None, stress) + " "
+    assert stress.describe() == ", driven until 0.3 s before the brakes"
+    rows = simulate_stop(cruising).truth
+    drag = spec.car.drag_area_coefficient * (spec.speed0_mps + spec.wind_mps) ** 2 / spec.car.true_mass_kg
+    driven = [r for r in rows if 0.05 < r["time_s"] < cruising.driven_until_s - 0.02]
+    coasting = [r for r in rows if cruising.driven_until_s + 0.02 < r["time_s"] < cruising.pre_roll_s - 0.02]
+    assert driven and coasting and drag > 0.05
+    assert all(abs(r["accel_long"]) < 0.1 * drag for r in driven)
+    assert all(r["accel_long"] == pytest.approx(-drag, rel=0.1) for r in coasting)
+    assert driven[-1]["speed_mps"] == pytest.approx(spec.speed0_mps, abs=1e-3)

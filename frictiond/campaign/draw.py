@@ -123,6 +123,9 @@ class StopSpec:
     lateral_capacity: float = 1.0
     wind_mps: float = 0.0               # along the road, a head wind positive (the air drag's speed is v + w)
     grade: float = 0.0                  # the road's rise over its run along the travel, uphill positive
+    # Driven at a steady speed until then (s from the start; None: the car coasts from the start):
+    # an engine's force on the body equal to the air's drag, no drive torque on the bus.
+    driven_until_s: float | None = None
     release_at_s: float | None = None   # after the brake onset
     release_for_s: float = 0.0
     dt_s: float = 0.001
@@ -312,13 +315,16 @@ class Stress:
     applied this soon after the start (`with_pre_roll`); `grade` (rise over run, uphill
     positive); `payload_kg`, the load aboard that the config does not know; `accel_offset_mps2`,
     the size of the accelerometer's offset (its drawn sign kept). The last two probe beyond the
-    draw's ranges (0–120 kg, 0–0.3 m/s²): a loaded car, a sensor mounted tilted."""
+    draw's ranges (0–120 kg, 0–0.3 m/s²): a loaded car, a sensor mounted tilted. `cruise_lift_s`:
+    the car driven at a steady speed (no drive torque on the bus) until this long before the brakes,
+    where the draw has it coast (`StopSpec.driven_until_s`)."""
 
     clean_sensors: bool = False
     pre_roll_s: float | None = None
     grade: float | None = None
     payload_kg: float | None = None
     accel_offset_mps2: float | None = None
+    cruise_lift_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.pre_roll_s is not None and not self.pre_roll_s >= 0.0:
@@ -330,6 +336,8 @@ class Stress:
         if self.accel_offset_mps2 is not None and not 0.0 <= self.accel_offset_mps2 <= MAX_ACCEL_OFFSET_SET:
             raise ValueError(f"accel_offset_mps2 must be within 0…{MAX_ACCEL_OFFSET_SET:g}, "
                              f"not {self.accel_offset_mps2}")
+        if self.cruise_lift_s is not None and not self.cruise_lift_s >= 0.0:
+            raise ValueError(f"cruise_lift_s must be ≥ 0, not {self.cruise_lift_s}")
 
     def apply(self, spec: StopSpec) -> StopSpec:
         """`spec` with these settings (`clean_sensors` is `draw_stop`'s, before the drive is drawn)."""
@@ -341,7 +349,10 @@ class Stress:
             drawn = spec.sensors.accel_offset_mps2
             offset = math.copysign(float(self.accel_offset_mps2), drawn if drawn != 0.0 else 1.0)
             spec = replace(spec, sensors=replace(spec.sensors, accel_offset_mps2=offset))
-        return spec if self.pre_roll_s is None else with_pre_roll(spec, self.pre_roll_s)
+        spec = spec if self.pre_roll_s is None else with_pre_roll(spec, self.pre_roll_s)
+        if self.cruise_lift_s is not None:
+            spec = replace(spec, driven_until_s=max(spec.pre_roll_s - float(self.cruise_lift_s), 0.0))
+        return spec
 
     def flags(self) -> str:
         """The options of `benchmarks/campaign.py` that set these (each with a leading space)."""
@@ -349,7 +360,8 @@ class Stress:
                         f" --pre-roll {self.pre_roll_s:g}" if self.pre_roll_s is not None else "",
                         f" --grade {self.grade:g}" if self.grade is not None else "",
                         f" --payload {self.payload_kg:g}" if self.payload_kg is not None else "",
-                        f" --accel-offset {self.accel_offset_mps2:g}" if self.accel_offset_mps2 is not None else ""])
+                        f" --accel-offset {self.accel_offset_mps2:g}" if self.accel_offset_mps2 is not None else "",
+                        f" --cruise-lift {self.cruise_lift_s:g}" if self.cruise_lift_s is not None else ""])
 
     def describe(self) -> str:
         """These settings for a report's title (", clean sensors, on a grade of 0.04", or "")."""
@@ -358,7 +370,9 @@ class Stress:
                         f", on a grade of {self.grade:g}" if self.grade is not None else "",
                         f", {self.payload_kg:g} kg aboard" if self.payload_kg is not None else "",
                         f", accelerometer offset ±{self.accel_offset_mps2:g} m/s²"
-                        if self.accel_offset_mps2 is not None else ""])
+                        if self.accel_offset_mps2 is not None else "",
+                        f", driven until {self.cruise_lift_s:g} s before the brakes"
+                        if self.cruise_lift_s is not None else ""])
 
 
 def draw_stop(seed: int, family: str | None = None, stress: Stress | None = None, **settings: Any) -> StopSpec:

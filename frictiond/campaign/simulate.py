@@ -243,12 +243,17 @@ class _Integrator:
             omega_dot[i] = dw / dt
         return omega_dot
 
-    def step_body(self) -> None:
+    def step_body(self, t: float) -> None:
         car, dt = self.car, self.dt
         # (the car's speed through the air; a car at rest is held by its brakes and tyres, not
         # blown along by a tail wind)
         air = self.v + self.spec.wind_mps if self.v > 0.0 else 0.0
         drag = car.drag_area_coefficient * air * abs(air)
+        driven = self.spec.driven_until_s
+        if driven is not None and t < driven:
+            # Driven at a steady speed: the engine's force holds off the drag (put on the body:
+            # the driven wheels' traction slip, a few tenths of a %, is left out).
+            drag = 0.0
         # `ax` is what an accelerometer reads, the contact and air forces over the mass; on a
         # grade the car's speed changes by that less gravity's share along the road.
         self.ax = -(sum(self.force) + drag) / car.true_mass_kg
@@ -280,7 +285,7 @@ class _Integrator:
             self.rows.append((t, self.v, self.x, self.ax, ay, yaw, self.driver, braking, *self.omega, *omega_dot,
                               *self.pressure, *self.force, *fz, *slip, *ground, *surfaces,
                               *(1.0 if c.active else 0.0 for c in self.commands), *lateral))
-            self.step_body()
+            self.step_body(t)
             self._check_end(t)
             if self.end_s is not None and t >= self.end_s:
                 break

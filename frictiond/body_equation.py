@@ -64,7 +64,10 @@ MAX_PRESSURE_LAG_S = 0.05
 MIN_PRESSURE_LAG_S = 0.002
 PRESSURE_LAG_TIME_CONSTANT_S = 5.0
 _PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
-# What the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
+# What coasting has shown of the accelerometer's offset (`_learn_rolling_offset`), and ...
+_COASTING_STATE = ("_rolling_offset_mps2", "_rolling_offset_samples", "_rolling_offset_m2",
+                   "_rolling_air_doubt_mps2")
+# ... what the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
 LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_gain_sum_w",
                  "_sensed_needed_nm", "_sensed_needed_time_s",
@@ -72,8 +75,7 @@ LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
                  "_brake_gain_doubt",
                  "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_accel_bias_m2",
-                 "_lag_state", "_resistance_doubt_sum_n", "_tyre_force_sum_n",
-                 "_rolling_offset_mps2", "_rolling_offset_samples", "_rolling_offset_m2", "_rolling_air_doubt_mps2")
+                 "_lag_state", "_resistance_doubt_sum_n", "_tyre_force_sum_n") + _COASTING_STATE
 
 
 class BodyEquation:
@@ -249,6 +251,13 @@ class BodyEquation:
             SENSOR_OFFSET_PRIOR_S / self.sample_period_s, mass_radius, opts.accel_offset_tolerance,
             *self.rolling_offset_prior())
         self._sensor_offset_mps2, self._sensor_offset_doubt_mps2 = fit[1:]
+
+    def take_coasting_from(self, other: BodyEquation) -> None:
+        """What `other` (the same car's front end, built for other cycle times) learnt of the
+        accelerometer's offset while coasting: its samples' inputs (the raw accelerometer, the
+        wheels' ω̇ fitted over their own timestamps, the speed) do not depend on the period."""
+        for name in _COASTING_STATE:
+            setattr(self, name, getattr(other, name))
 
     def rolling_offset_prior(self) -> tuple[float, float]:
         """What free rolling's body equation says of the accelerometer's offset before braking

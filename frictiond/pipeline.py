@@ -126,8 +126,13 @@ class Pipeline:
         # A car that sends only its master-cylinder pressure maps it to all four wheels.
         pressure_sources = {(config.signals[n].message, config.signals[n].signal)
                             for n in PRESSURE_NAMES if n in config.signals}
+        before: FrontEnd | None = getattr(self, "front_end", None)
         self.front_end: FrontEnd = make_front_end(config.vehicle, config.frontend, messages, trigger,
                                                   pressures_are_master=len(pressure_sources) == 1)
+        if before is not None:
+            # (rebuilt at the measured cycle times: what coasting showed of the accelerometer so
+            # far is the sensor's, whatever the period its samples were taken at)
+            self.front_end.take_coasting_from(before)
         if self._own_estimator:
             learnt = self.estimator.state() if self.estimator is not None else None
             self.estimator = make_estimator(config, self.front_end.sample_period_s)

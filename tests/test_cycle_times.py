@@ -88,3 +88,25 @@ def test_frames_of_messages_with_a_cycle_time_do_not_count_and_never_break_the_p
     for k in range(FRAMES_TO_MEASURE):
         result = probe.see("ACCEL", 0.02 * k)
     assert result == {"ACCEL": 0.02}
+
+
+def test_the_front_end_rebuilt_at_the_measured_cycle_keeps_what_coasting_showed(tmp_path):
+    # The accelerometer's offset coasting shows (`BodyEquation._learn_rolling_offset`) is the
+    # sensor's, whatever period its samples were first taken at: the rebuild after the first
+    # frames carries it over, and at the brakes both configs know it from the same coasting.
+    declared, silent = _config(tmp_path, 20), _config(tmp_path, None)
+    frames, _ = simulate_frames(declared, "wet", seed=3)
+    at_brakes = {}
+    for config in (declared, silent):
+        pipeline = Pipeline(config)
+        for f in frames:
+            pipeline.process(f)
+            if pipeline.last_sample is not None and pipeline.last_sample.braking:
+                break
+        fe = pipeline.front_end
+        at_brakes[config is silent] = (fe._rolling_offset_samples, fe.rolling_offset_prior())
+    assert pipeline.measured_cycle_times          # (the silent config's front end was rebuilt)
+    (n_declared, (mean_declared, _)), (n_silent, (mean_silent, _)) = at_brakes[False], at_brakes[True]
+    # (a few are lost while the rebuilt front end fills its derivative window; without the carry, 16 more)
+    assert n_declared > 20 and n_declared - 10 <= n_silent <= n_declared
+    assert mean_silent == pytest.approx(mean_declared, abs=0.01)

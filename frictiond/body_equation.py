@@ -225,7 +225,8 @@ class BodyEquation:
         offset alone; and a resistance the config does not know (rolling, the drivetrain's drag) is
         in it as it is in every braking sample, the intercept of `gain_and_sensor_offset`'s fit.
         Braking alone tells that intercept only from how its torque varies (a steady stop on snow:
-        not at all). Then the offset's doubt (`rolling_offset_prior`)."""
+        not at all). The mean of these samples, with its doubt (`rolling_offset_prior`), is that
+        fit's prior, and the offset the forces take off until the brakes go on."""
         opts, veh = self.options, self.vehicle
         if opts.level_road or not opts.brake_gain_correction or not opts.coasting_offset:
             return

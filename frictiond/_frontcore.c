@@ -893,14 +893,28 @@ static void learn_pressure_lag(FEState *s, const double *k, double brake, double
     s->lag[0] = s_bb, s->lag[1] = s_bd, s->lag[2] = s_dd, s->lag[3] = s_bn, s->lag[4] = s_dn;
 }
 
+/* body_equation._spread_variance: offset samples' variance with a prior of a few spread by the tolerance. */
+static double spread_variance(long samples, double sum_squares, double tolerance)
+{
+    return (sum_squares + ACCEL_BIAS_PRIOR_SAMPLES * tolerance * tolerance)
+           / ((double)(samples > 1 ? samples - 1 : 0) + ACCEL_BIAS_PRIOR_SAMPLES);
+}
+
+/* VehicleParams.resistance_doubt_n: how much more drag than configured the car may meet at
+ * `speed` in a head wind of `wind`. */
+static double resistance_doubt(const double *k, double speed, double wind)
+{
+    const double air = speed + wind;
+    return k[K_DRAG_DOUBT] * air * air + k[K_DRAG] * wind * (speed + air);
+}
+
 /* body_equation.offset_doubt_mps2: what the offset learnt from free rolling may still be off by. */
 static double offset_doubt(long samples, double sum_squares, double tolerance)
 {
     if (samples >= ACCEL_BIAS_LEARNT_SAMPLES)
         return 0.0;
-    const double variance = (sum_squares + ACCEL_BIAS_PRIOR_SAMPLES * tolerance * tolerance)
-                            / ((double)(samples > 1 ? samples - 1 : 0) + ACCEL_BIAS_PRIOR_SAMPLES);
-    return py_min(tolerance, sqrt(3.0 * variance / (double)(samples > 1 ? samples : 1)));
+    return py_min(tolerance, sqrt(3.0 * spread_variance(samples, sum_squares, tolerance)
+                                  / (double)(samples > 1 ? samples : 1)));
 }
 
 /* body_equation.BodyEquation.rolling_offset_prior: free rolling's offset (*mean) and its
@@ -912,8 +926,7 @@ static double rolling_offset_prior(const FEState *s, const double *k, double *me
     if (s->rolling_samples == 0)
         return tolerance;
     const double remembered = py_min((double)s->rolling_samples, py_max(k[K_BIAS_TAU], 1e-3) / k[K_SAMPLE_PERIOD]);
-    const double variance = (s->rolling_m2 + ACCEL_BIAS_PRIOR_SAMPLES * tolerance * tolerance)
-                            / ((double)(s->rolling_samples > 1 ? s->rolling_samples - 1 : 0) + ACCEL_BIAS_PRIOR_SAMPLES);
+    const double variance = spread_variance(s->rolling_samples, s->rolling_m2, tolerance);
     const double width = sqrt(3.0 * variance / remembered) + s->rolling_air;
     *mean = py_min(py_max(s->rolling_offset, -tolerance), tolerance);
     return py_min(tolerance, py_max(BODY_ACCEL_TOLERANCE, width));
@@ -985,8 +998,7 @@ static void learn_rolling_offset(FEState *s, const double *k, double speed, cons
     const double offset = a_raw + resistance / k[K_MASS] + torque / mass_radius;
     if (!(isfinite(offset) && fabs(offset) <= SENSOR_OFFSET_LIMIT))
         return;
-    const double wind = py_max(k[K_WIND_DOUBT], FAULT_WIND), air = speed + wind;
-    const double air_doubt = (k[K_DRAG_DOUBT] * air * air + k[K_DRAG] * wind * (speed + air)) / k[K_MASS];
+    const double air_doubt = resistance_doubt(k, speed, py_max(k[K_WIND_DOUBT], FAULT_WIND)) / k[K_MASS];
     s->rolling_samples += 1;
     const double alpha = py_max(py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_BIAS_TAU], 1e-3)),
                                 1.0 / (double)s->rolling_samples);
@@ -1243,9 +1255,8 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     }
     /* (the contact forces' acceleration, less the air's drag up to its doubt: SensorFaults._deceleration_unexplained) */
     const double accel_contact = a_raw - s.sensor_offset;   /* (on a grade gravity shifts no load either) */
-    const double v_air = fastest + k[K_WIND_DOUBT];
-    const double air = (k[K_ROLLING] * fastest + k[K_DRAG] * fastest * fastest + k[K_DRAG_DOUBT] * v_air * v_air
-                        + k[K_DRAG] * k[K_WIND_DOUBT] * (fastest + v_air)) / k[K_MASS];
+    const double air = (k[K_ROLLING] * fastest + k[K_DRAG] * fastest * fastest
+                        + resistance_doubt(k, fastest, k[K_WIND_DOUBT])) / k[K_MASS];
     if (!braking && !driving && accel_contact + spin_up + air < -k[K_UNEXPLAINED_DECEL])
         s.unexplained += (s.has_last_sample && s.last_sample != 0.0) ? py_max(0.0, t_c - s.last_sample) : 0.0;
     else

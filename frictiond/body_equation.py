@@ -237,9 +237,7 @@ class BodyEquation:
             return
         # What the drag the config gives may be off by at this speed, a breeze at least: braking
         # at other speeds meets another drag error, which the intercept cannot hold.
-        wind = max(veh.wind_doubt, FAULT_WIND_MPS)
-        air = speed + wind
-        air_doubt = (veh.drag_area_doubt * air * air + veh.drag_area_coefficient * wind * (speed + air)) / veh.mass
+        air_doubt = veh.resistance_doubt_n(speed, max(veh.wind_doubt, FAULT_WIND_MPS)) / veh.mass
         self._rolling_offset_samples += 1
         alpha = max(min(1.0, self.sample_period_s / max(opts.accel_bias_time_constant, 1e-3)),
                     1.0 / self._rolling_offset_samples)
@@ -270,8 +268,7 @@ class BodyEquation:
         if samples == 0:
             return 0.0, tolerance
         remembered = min(float(samples), max(self.options.accel_bias_time_constant, 1e-3) / self.sample_period_s)
-        prior = ACCEL_BIAS_PRIOR_SAMPLES
-        variance = (self._rolling_offset_m2 + prior * tolerance**2) / (max(samples - 1, 0) + prior)
+        variance = _spread_variance(samples, self._rolling_offset_m2, tolerance)
         width = math.sqrt(3.0 * variance / remembered) + self._rolling_air_doubt_mps2
         width = min(tolerance, max(BODY_ACCEL_TOLERANCE_MPS2, width))
         return min(max(self._rolling_offset_mps2, -tolerance), tolerance), width
@@ -494,9 +491,15 @@ def offset_doubt_mps2(samples: int, sum_squares: float, tolerance: float = UNLEA
     forty 0.01–0.03."""
     if samples >= ACCEL_BIAS_LEARNT_SAMPLES:
         return 0.0
+    return min(tolerance, math.sqrt(3.0 * _spread_variance(samples, sum_squares, tolerance) / max(samples, 1)))
+
+
+def _spread_variance(samples: int, sum_squares: float, tolerance: float) -> float:
+    """The variance of offset samples whose squared deviations sum to `sum_squares`, with a prior
+    of `ACCEL_BIAS_PRIOR_SAMPLES` samples spread by `tolerance` (a few that happen to agree do
+    not make an offset known)."""
     prior = ACCEL_BIAS_PRIOR_SAMPLES
-    variance = (sum_squares + prior * tolerance**2) / (max(samples - 1, 0) + prior)
-    return min(tolerance, math.sqrt(3.0 * variance / max(samples, 1)))
+    return (sum_squares + prior * tolerance**2) / (max(samples - 1, 0) + prior)
 
 
 def gain_and_sensor_offset(sum_tt: float, sum_tn: float, sum_t: float, sum_n: float, sum_w: float,

@@ -59,14 +59,15 @@ class VehicleParams:
         """Rolling resistance and aerodynamic drag on the car at `speed_mps` [N]."""
         return self.rolling_resistance * speed_mps + self.drag_area_coefficient * speed_mps * speed_mps
 
-    def resistance_doubt_n(self, speed_mps: float) -> float:
+    def resistance_doubt_n(self, speed_mps: float, wind_mps: float | None = None) -> float:
         """How much more resistance than `resistance_force` the car may meet at `speed_mps` [N]:
         the drag of a car whose ½ρC_dA is larger by `drag_area_doubt`, in a head wind of
-        `wind_doubt`. The body equation cannot tell that force from the tyres' (both slow the car),
-        so it is what the brake gain and the car's measured grip may be off by."""
-        air = speed_mps + self.wind_doubt
+        `wind_doubt` (or `wind_mps`). The body equation cannot tell that force from the tyres'
+        (both slow the car), so it is what the brake gain and the car's measured grip may be off by."""
+        wind = self.wind_doubt if wind_mps is None else wind_mps
+        air = speed_mps + wind
         # ((D + ΔD)·air² − D·v², as its two parts: no rounding leaves a doubt where both are 0)
-        return self.drag_area_doubt * air * air + self.drag_area_coefficient * self.wind_doubt * (speed_mps + air)
+        return self.drag_area_doubt * air * air + self.drag_area_coefficient * wind * (speed_mps + air)
 
     def brake_gain(self, wheel_index: int) -> float:
         return self.brake_gain_front if wheel_index < 2 else self.brake_gain_rear

@@ -24,8 +24,7 @@ def run_campaign(seeds: Sequence[int], *, workers: int | None = None, chunk: int
                  stress: Stress | None = None) -> list[Row]:
     """Rows of every seed, in seed order. `workers=0`: in this process, one after the other;
     otherwise Dask workers (`None`: one per core) or the cluster at `scheduler`. `stress`: what
-    every stop sets in place of its draw (`draw.Stress`: clean sensors, an early brake, a grade,
-    a payload, an accelerometer offset)."""
+    every stop sets in place of its draw (`draw.Stress`)."""
     rows: list[Row] = []
     parts = chunks(seeds, chunk)
     if workers == 0 and scheduler is None:

@@ -850,7 +850,7 @@ static double update_speed(FEState *s, const double *k, double time_s, const dou
         } else {
             const double ceiling = fastest / (1.0 - k[K_MIN_BRAKED_SLIP]);
             if (v > ceiling)
-                v += k[K_GAIN_DOWN] * (ceiling - v);
+                v -= py_min(k[K_GAIN_DOWN] * (v - ceiling), k[K_CORRECTION_RATE] * dt);
         }
     }
     v = py_min(py_max(v, 0.0), MAX_SPEED);

@@ -86,7 +86,8 @@ class FrontEndOptions:
     speed_gain_down: float = 0.02         # ... and when even the fastest wheel reads too slow
     # Under braking two wheels faster than the estimate pull it up by no more than this (m/s²: the
     # learnt accelerometer offset's error, with margin), unless they stay faster for longer than a
-    # released tyre's overshoot lasts (`speed_estimate.SpeedEstimate._speed_correction_limit`)
+    # released tyre's overshoot lasts (`speed_estimate.SpeedEstimate._speed_correction_limit`);
+    # wheels all beyond `min_braked_slip` pull it down by no more than this either
     speed_correction_rate: float = 0.1
     speed_correction_hold_s: float = 0.2
     # Under braking even the least-braked wheel slips less than this: only a bound against an

@@ -4,7 +4,7 @@ A ground-speed sensor's reading while it is fresh and plausible; otherwise an ob
 the accelerometer and corrected by the wheels: pulled towards their mean while they roll free,
 under braking only up by two wheels faster than it (slowly, unless they stay faster: a released
 tyre overshoots the car's speed) and down only when even the fastest wheel would slip more than
-an ABS lets it; over a suspect sample carried by the accelerometer alone. `SpeedEstimate` is a
+an ABS lets it (slowly); over a suspect sample carried by the accelerometer alone. `SpeedEstimate` is a
 part of `frontend.FrontEnd` (its state, `_speed_estimate_mps`, `_speed_time_s`,
 `_wheels_faster_since_s` and `_speed_restarted_braking`, is the front end's, where
 `_frontcore.sample_physics` reads and writes it); the code here is the fallback without a C
@@ -58,11 +58,13 @@ class SpeedEstimate:
                 # Braked wheels all read low during ABS: even the least-braked one slips by
                 # several percent, so pulling towards the fastest wheel biases the speed (and
                 # every slip) low. Pull only when the estimate would put even the fastest wheel
-                # beyond what an ABS lets it slip: an accelerometer offset or a corrupt input
-                # cannot make the estimate drift up without bound.
+                # beyond what an ABS lets it slip, and no faster than an accelerometer's offset
+                # drifts it (`speed_correction_rate`): an offset cannot make the estimate drift
+                # up without bound, yet a threshold ABS dumping slowly, which holds every wheel
+                # past that slip for seconds, cannot drag it (and every slip) down either.
                 ceiling = fastest / (1.0 - opts.min_braked_slip)
                 if v > ceiling:
-                    v += opts.speed_gain_down * (ceiling - v)
+                    v -= min(opts.speed_gain_down * (v - ceiling), opts.speed_correction_rate * dt)
         v = min(max(v, 0.0), MAX_SPEED_MPS)
         self._speed_estimate_mps = v
         return v, False

@@ -893,7 +893,7 @@ static void learn_pressure_lag(FEState *s, const double *k, double brake, double
     s->lag[0] = s_bb, s->lag[1] = s_bd, s->lag[2] = s_dd, s->lag[3] = s_bn, s->lag[4] = s_dn;
 }
 
-/* body_equation._spread_variance: offset samples' variance with a prior of a few spread by the tolerance. */
+/* free_rolling_offset.spread_variance: offset samples' variance with a prior of a few spread by the tolerance. */
 static double spread_variance(long samples, double sum_squares, double tolerance)
 {
     return (sum_squares + ACCEL_BIAS_PRIOR_SAMPLES * tolerance * tolerance)
@@ -908,7 +908,7 @@ static double resistance_doubt(const double *k, double speed, double wind)
     return k[K_DRAG_DOUBT] * air * air + k[K_DRAG] * wind * (speed + air);
 }
 
-/* body_equation.offset_doubt_mps2: what the offset learnt from free rolling may still be off by. */
+/* free_rolling_offset.offset_doubt_mps2: what the offset learnt from free rolling may still be off by. */
 static double offset_doubt(long samples, double sum_squares, double tolerance)
 {
     if (samples >= ACCEL_BIAS_LEARNT_SAMPLES)
@@ -1066,7 +1066,7 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
     if (!released) {
         if (k[K_LAG_COMPENSATION] != 0.0)
             learn_pressure_lag(s, k, raw_brake, raw_rate, needed);
-        /* (body_equation.BodyEquation._needed_as_sensed: N through the sensors' learnt lag, fitted
+        /* (pressure_lag.PressureLag._needed_as_sensed: N through the sensors' learnt lag, fitted
          * against the pressures as read) */
         const double lag = s->lag[LAG_LAG], now = s->lag[LAG_TIME];
         const double elapsed = now - s->sensed_needed_time;

@@ -5,9 +5,9 @@ torque the pressures say, it gives a brake-gain correction (pads move ±20 % in 
 gain absorbs the car's load), the pressure sensors' lag, and a verdict: the pressures do not say
 what the brakes do (a fault), or, on a car sending one master-cylinder pressure, an ABS has released
 wheels (no wheel's brake torque is known from then on); and, as the intercept of that gain's fit,
-the accelerometer's own offset. While the car rolls free the wheels give what the accelerometer
-reads beyond their acceleration: its offset and, on a grade, gravity's share, which only the
-speed estimate may take off (the brakes and the tyres' loads feel no gravity along the road).
+the accelerometer's own offset, with what coasting shows of it as the fit's prior. The pressure
+sensors' lag is `pressure_lag`'s, and the offset free rolling shows (with gravity's share on a
+grade, for the speed estimate) `free_rolling_offset`'s.
 `BodyEquation` is a part of `frontend.FrontEnd`: its state lives
 on the front end, where the compiled `_frontcore.sample_physics` reads and writes it by these
 names; the code here is the fallback without a C compiler and the reference (tests compare).
@@ -15,6 +15,9 @@ names; the code here is the fallback without a C compiler and the reference (tes
 from __future__ import annotations
 
 import math
+
+from .free_rolling_offset import UNLEARNT_ACCEL_TOLERANCE_MPS2, FreeRollingOffset, spread_variance
+from .pressure_lag import PRESSURE_SENSOR_LAG_S, PressureLag
 
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
@@ -28,11 +31,6 @@ LOCKED_WHEEL_RATIO = 0.05      # (also in _frontcore.c)
 # of the order of the wheels' inertia torques). (Also in _frontcore.c.)
 BODY_ACCEL_TOLERANCE_MPS2 = 0.05
 PRESSURE_TOLERANCE_BAR = 0.25
-# ... and the offset a sensor may have, on top, until the body equation has told it from the
-# gain (a fault seen right after start-up would be the accelerometer's); also how far the offset
-# for the speed estimate may be off until free rolling has taught it (this many samples).
-UNLEARNT_ACCEL_TOLERANCE_MPS2 = 0.3
-ACCEL_BIAS_LEARNT_SAMPLES = 50
 # The accelerometer's own offset, told from the brake gain by the body equation over braking
 # (`gain_and_sensor_offset`): a prior of none weighing like this much braking at a steady torque
 # (the body equation's residuals stay correlated for ~0.05 s and carry the axles' gain split and
@@ -46,24 +44,6 @@ SENSOR_OFFSET_LIMIT_MPS2 = 1.0
 # 5 m/s head wind is 110 N more drag, a fifth of the tyres' force on μ 0.034 ice; wind_doubt, 0
 # by default, is what the gain's doubt allows for). (Also in _frontcore.c.)
 FAULT_WIND_MPS = 5.0
-# How far the offset learnt so far may be off (`offset_doubt_mps2`): its samples' standard error,
-# their spread taken with a prior of this many samples spread by the tolerance above (two or three
-# samples that happen to agree do not make an offset known). (Also in _frontcore.c.)
-ACCEL_BIAS_PRIOR_SAMPLES = 2.0
-# ... and while the brakes' torque moves, what a pressure sensor trailing it by this long misses
-# (a pedal applied at 1,500 bar/s, an ABS dump: tens of bar).
-PRESSURE_SENSOR_LAG_S = 0.04
-# The pressure sensors' own lag, identified from the body equation (`_learn_pressure_lag`), is
-# taken as at most this (a first-order lag of a few tens of ms; more would be a broken sensor),
-# learnt over about this much braking, with a prior of "no lag" weighing like ten samples of a
-# pressure moving 10 kN·m/s. (Also in _frontcore.c.)
-MAX_PRESSURE_LAG_S = 0.05
-# ... and below this, not told from none: a lag-free sensor's fit wanders by up to ~1 ms (the
-# body equation's noise, the torques' rates being finite differences), and advancing the torques
-# by that only adds noise.
-MIN_PRESSURE_LAG_S = 0.002
-PRESSURE_LAG_TIME_CONSTANT_S = 5.0
-_PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
 # What coasting has shown of the accelerometer's offset (`_learn_rolling_offset`), and ...
 _COASTING_STATE = ("_rolling_offset_mps2", "_rolling_offset_samples", "_rolling_offset_m2",
                    "_rolling_air_doubt_mps2")
@@ -78,24 +58,20 @@ LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_
                  "_lag_state", "_resistance_doubt_sum_n", "_tyre_force_sum_n") + _COASTING_STATE
 
 
-class BodyEquation:
-    """Brake gain, pressure lag, accelerometer offset and the brake model's verdict, learnt from
-    the body equation sample by sample (`_update_brake_gain`, `_learn_accel_bias`)."""
+class BodyEquation(PressureLag, FreeRollingOffset):
+    """Brake gain, pressure lag (`PressureLag`), the accelerometer's own offset and the brake
+    model's verdict, learnt from the body equation sample by sample (`_update_brake_gain`,
+    `_learn_rolling_offset`); the offset free rolling shows is `FreeRollingOffset`'s."""
 
     def _reset_body_equation(self) -> None:
         """What the body equation has learnt: nothing yet."""
-        self._accel_bias_mps2 = 0.0
-        self._accel_bias_samples = 0
-        self._accel_bias_m2 = 0.0           # Σ of squared deviations from the running mean (Welford)
+        self._reset_pressure_lag()
+        self._reset_free_rolling_offset()
         self._slipping_time_s = -math.inf   # the newest sample with a braked wheel slipping
         self._brake_gain_factor = 1.0
         self._brake_gain_doubt = 0.0        # what the body equation leaves of its error (`gain_within_offset_ambiguity`)
         self._gain_sum_tt = self._gain_sum_tn = _BRAKE_GAIN_PRIOR_WEIGHT   # Σ T², Σ T·N
         self._gain_sum_t = self._gain_sum_n = self._gain_sum_w = 0.0       # Σ T, Σ N, Σ 1
-        # N as a pressure sensor with the learnt lag would read it (`_needed_as_sensed`), and the
-        # time of the sample it was last brought to
-        self._sensed_needed_nm = math.nan
-        self._sensed_needed_time_s = -math.inf
         # The accelerometer's own offset (what it reads beyond the contact and air forces), the
         # intercept of the gain's regression, and the half-width of what it may still be off by.
         self._sensor_offset_mps2 = 0.0
@@ -113,10 +89,6 @@ class BodyEquation:
         self._brake_released = False       # one master pressure overstating the brakes: an ABS at work
         self._brake_model_holds = True
         self._unjudged_s = 0.0             # time since a sample last entered that window
-        # The pressure-lag regression (`_learn_pressure_lag`): Σ B², Σ B·Ḃ, Σ Ḃ², Σ B·N, Σ Ḃ·N, the
-        # lag it gives, then the time and the four matched brake torques of the last sample (their
-        # rates). One tuple, replaced whole, so that a suspect sample's state is put back as is.
-        self._lag_state: tuple[float, ...] = (0.0,) * 6 + (math.nan, 0.0, 0.0, 0.0, 0.0)
         # Over the brake gain's time constant of braking: Σ what the car's resistance may be off
         # by, Σ the tyres' total force (`resistance_doubt_share`).
         self._resistance_doubt_sum_n = self._tyre_force_sum_n = 0.0
@@ -152,26 +124,10 @@ class BodyEquation:
         self._tyre_force_sum_n = keep * self._tyre_force_sum_n + tyre_force_n
 
     @property
-    def accel_offset_doubt_mps2(self) -> float:
-        """The standard error of the accelerometer offset learnt from free rolling so far (m/s²),
-        the one the speed estimate takes off: 0 once learnt."""
-        return offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2,
-                                 self.options.accel_offset_tolerance) / math.sqrt(3.0)
-
-    @property
     def wheel_torques_unknown(self) -> bool:
         """Whether no wheel's brake torque is known: the car sends one master-cylinder pressure
         for all wheels, and an ABS has released wheels in this stop (`_brake_released`)."""
         return self.pressures_are_master and self._brake_released
-
-    @property
-    def accel_bias_mps2(self) -> float:
-        return self._accel_bias_mps2
-
-    @property
-    def pressure_lag_s(self) -> float:
-        """The pressure sensors' lag behind the brakes, as learnt from the body equation."""
-        return self._lag_state[5]
 
     def body_equation_note(self) -> str | None:
         """What the body equation has learnt, for a user checking a car's config: the brake gain
@@ -196,26 +152,6 @@ class BodyEquation:
             note += (" — the offset at its tolerance's edge: a sensor reading further off (say so, "
                      "frontend.accel_offset_tolerance) or pressures off by a factor")
         return note
-
-    def _learn_accel_bias(self, time_s: float, omega_dot: list[float], accel_long_raw: float) -> None:
-        # Free rolling: the wheels' own acceleration is the vehicle's; the difference is offset
-        # and, on a grade, gravity's share: what the speed estimate takes off, not the forces.
-        wheel_accel = self.vehicle.wheel_radius * (sum(omega_dot) / len(omega_dot))
-        alpha = min(1.0, self.sample_period_s / max(self.options.accel_bias_time_constant, 1e-3))
-        error = accel_long_raw - wheel_accel
-        if abs(error) < 2.0:
-            # The plain mean of the first samples, then the exponential forgetting: right after
-            # start-up the offset is known after a second of rolling, not only after several τ.
-            self._accel_bias_samples += 1
-            alpha = max(alpha, 1.0 / self._accel_bias_samples)
-            before = self._accel_bias_mps2
-            self._accel_bias_mps2 += alpha * (error - before)
-            self._accel_bias_m2 += (error - before) * (error - self._accel_bias_mps2)
-            if self.options.level_road:
-                # (no grade: what free rolling taught is the sensor's own offset)
-                self._sensor_offset_mps2 = self._accel_bias_mps2
-                self._sensor_offset_doubt_mps2 = offset_doubt_mps2(self._accel_bias_samples, self._accel_bias_m2,
-                                                                   self.options.accel_offset_tolerance)
 
     def _learn_rolling_offset(self, speed: float, omega_dot: list[float], accel_long_raw: float,
                               drive: list[float]) -> None:
@@ -268,7 +204,7 @@ class BodyEquation:
         if samples == 0:
             return 0.0, tolerance
         remembered = min(float(samples), max(self.options.accel_bias_time_constant, 1e-3) / self.sample_period_s)
-        variance = _spread_variance(samples, self._rolling_offset_m2, tolerance)
+        variance = spread_variance(samples, self._rolling_offset_m2, tolerance)
         width = math.sqrt(3.0 * variance / remembered) + self._rolling_air_doubt_mps2
         width = min(tolerance, max(BODY_ACCEL_TOLERANCE_MPS2, width))
         return min(max(self._rolling_offset_mps2, -tolerance), tolerance), width
@@ -412,22 +348,6 @@ class BodyEquation:
         else:
             self._brake_gain_factor, self._brake_gain_doubt = gain_within_offset_ambiguity(gain, lim, ambiguity)
 
-    def _needed_as_sensed(self, needed: float) -> float:
-        """The torque the body needs, through the pressure sensors' first-order lag as learnt: what
-        the pressures read, times the gain, less the offset's torque. The gain is fitted to the
-        pressures as read against this, not to the pressures advanced by the lag (B + τ·Ḃ) against
-        N: Ḃ is a difference of noisy readings, and noise in the regressor biases a least-squares
-        slope towards 0 (at a 36 ms lag, 0.25 bar of noise and an ABS from 157 km/h a whole stop's
-        fit gave the gain 0.94 for 1.05 and the offset −0.43 m/s² for +0.30; the lag taken off N
-        instead, 1.00).
-        Restarted from N after a gap in the samples the gain learns from."""
-        lag, now = self._lag_state[5], self._lag_state[6]
-        last, elapsed = self._sensed_needed_nm, now - self._sensed_needed_time_s
-        if lag > 0.0 and math.isfinite(last) and 0.0 < elapsed <= 1.5 * self.sample_period_s:
-            needed = last + (needed - last) * -math.expm1(-elapsed / lag)
-        self._sensed_needed_nm, self._sensed_needed_time_s = needed, now
-        return needed
-
     def _brake_gain_keep(self) -> float:
         """What a braking sample leaves of the gain's sums (and `resistance_doubt_share`'s): the
         exponential forgetting over `brake_gain_time_constant`."""
@@ -443,63 +363,6 @@ class BodyEquation:
         veh = self.vehicle
         mean_brake = self._recent_brake_nm / max(self._recent_weight_nm, 1e-9)
         return veh.mass * veh.wheel_radius * doubt / max(mean_brake, 1e-9)
-
-    def _brake_torque_rates(self, time_s: float, torques: list[float]) -> list[float]:
-        """Each wheel's matched brake torque's rate since the last sample (0 after a gap, and
-        where either torque is not finite: one bad sample must not spoil the next one's torque)."""
-        state = self._lag_state
-        dt = time_s - state[6]            # (NaN before the first sample: no rate)
-        self._lag_state = state[:6] + (time_s, *torques)
-        if not 0.0 < dt <= self.options.max_gap:
-            return [0.0, 0.0, 0.0, 0.0]
-        rates = [(b - b0) / dt for b, b0 in zip(torques, state[7:])]
-        return [r if math.isfinite(r) else 0.0 for r in rates]
-
-    def _learn_pressure_lag(self, brake: float, rate: float, needed: float) -> None:
-        """The pressure sensors' lag τ from the body equation: the brakes' torque the body needs,
-        N = ΣR·F_x − ΣJ·ω̇, is k·(B + τ·Ḃ) at every instant, B the torque the pressures say; a
-        least-squares fit of N on B and Ḃ gives k and k·τ (each sample as it comes, with forgetting,
-        and a prior of no lag). The wheels' torque balance sees the same lag: under ABS it read μ
-        30 % high while the pressure fell and 25 % low while it rose (the peak read high)."""
-        s_bb, s_bd, s_dd, s_bn, s_dn, lag = self._lag_state[:6]
-        keep = 1.0 - min(1.0, self.sample_period_s / PRESSURE_LAG_TIME_CONSTANT_S)
-        s_bb = keep * s_bb + brake * brake
-        s_bd = keep * s_bd + brake * rate
-        s_dd = keep * s_dd + rate * rate
-        s_bn = keep * s_bn + brake * needed
-        s_dn = keep * s_dn + rate * needed
-        if not all(map(math.isfinite, (s_bb, s_bd, s_dd, s_bn, s_dn))):
-            return      # a NaN here would stay in the sums for good
-        dd = s_dd + _PRESSURE_LAG_PRIOR
-        det = s_bb * dd - s_bd * s_bd
-        if det > 0.0:
-            k = (s_bn * dd - s_bd * s_dn) / det
-            k_lag = (s_bb * s_dn - s_bd * s_bn) / det
-            # (a gain k far from 1 is a body equation that does not hold: no lag from it)
-            if 0.5 < k < 2.0:
-                lag = min(max(k_lag / k, 0.0), MAX_PRESSURE_LAG_S)
-                lag = lag if lag >= MIN_PRESSURE_LAG_S else 0.0
-        self._lag_state = (s_bb, s_bd, s_dd, s_bn, s_dn, lag) + self._lag_state[6:]
-
-
-def offset_doubt_mps2(samples: int, sum_squares: float, tolerance: float = UNLEARNT_ACCEL_TOLERANCE_MPS2) -> float:
-    """How far the accelerometer offset learnt from `samples` free-rolling samples (their squared
-    deviations summing to `sum_squares`) may be off, as the half-width of a uniform error of the
-    same σ as its standard error (√3 σ): at most the sensor's `tolerance` (none learnt),
-    0 once learnt (`ACCEL_BIAS_LEARNT_SAMPLES`, as the brake check counts it). The samples'
-    spread is 0.07–0.5 m/s² by car and sensors: three samples leave the offset 0.25 m/s² off,
-    forty 0.01–0.03."""
-    if samples >= ACCEL_BIAS_LEARNT_SAMPLES:
-        return 0.0
-    return min(tolerance, math.sqrt(3.0 * _spread_variance(samples, sum_squares, tolerance) / max(samples, 1)))
-
-
-def _spread_variance(samples: int, sum_squares: float, tolerance: float) -> float:
-    """The variance of offset samples whose squared deviations sum to `sum_squares`, with a prior
-    of `ACCEL_BIAS_PRIOR_SAMPLES` samples spread by `tolerance` (a few that happen to agree do
-    not make an offset known)."""
-    prior = ACCEL_BIAS_PRIOR_SAMPLES
-    return (sum_squares + prior * tolerance**2) / (max(samples - 1, 0) + prior)
 
 
 def gain_and_sensor_offset(sum_tt: float, sum_tn: float, sum_t: float, sum_n: float, sum_w: float,

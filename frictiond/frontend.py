@@ -39,8 +39,9 @@ except ImportError:  # pragma: no cover - depends on the install
     compiled_front = None
 
 from .abs_activity import AbsActivity
-from .body_equation import LEARNT_STATE, UNLEARNT_ACCEL_TOLERANCE_MPS2, BodyEquation
+from .body_equation import LEARNT_STATE, BodyEquation
 from .doubtful_inputs import DoubtfulInputs
+from .free_rolling_offset import UNLEARNT_ACCEL_TOLERANCE_MPS2
 from .input_alignment import InputAlignment, MessageHistory, new_series
 from .input_names import (ABS_FLAG_NAMES, DRIVE_TORQUE_NAMES, MASTER_PRESSURE_NAME, PRESSURE_NAMES, REQUIRED_INPUTS,
                           WHEEL_SPEED_NAMES)

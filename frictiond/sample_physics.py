@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from .body_equation import UNLEARNT_ACCEL_TOLERANCE_MPS2
+from .free_rolling_offset import UNLEARNT_ACCEL_TOLERANCE_MPS2
 from .samples import FrontEndResult, PhysicalSample
 from .sensor_faults import stood_in_for
 from .speed_estimate import MAX_ABS_ACCEL_MPS2

@@ -13,8 +13,10 @@ import pytest
 from frictiond.campaign import draw as draw_mod
 from frictiond.campaign.abs_control import ABS_FAMILIES
 from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, Stress, draw_stop, seeds_for
-from frictiond.campaign.report import format_families, format_not_valid, full_report, reproduce_command, target_rows
+from frictiond.campaign.report import (format_families, format_not_valid, format_peak_shown, full_report,
+                                      reproduce_command, target_rows)
 from frictiond.campaign.run import load_rows, run_campaign, save_rows
+from frictiond.campaign.score import truth_summary
 from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, REAR_WHEEL_MESSAGE, WHEEL_MESSAGE
 from frictiond.campaign.simulate import simulate_stop
 from frictiond.campaign.tyres import BURCKHARDT_SURFACES, TyreCurve
@@ -506,3 +508,23 @@ def test_a_stop_set_to_cruise_is_driven_until_the_driver_lifts():
     assert all(abs(r["accel_long"]) < 0.1 * drag for r in driven)
     assert all(r["accel_long"] == pytest.approx(-drag, rel=0.1) for r in coasting)
     assert driven[-1]["speed_mps"] == pytest.approx(spec.speed0_mps, abs=1e-3)
+
+
+def test_past_peak_time_is_the_time_some_wheel_slips_beyond_its_own_peak():
+    # Stop 14: a slip controller capped at 0.107 on a snow curve whose peak lies beyond: every
+    # wheel held at 92 % of its grip, none past its peak. Stop 23: a threshold ABS dumping slowly
+    # runs the wheels deep past theirs for most of the stop.
+    held, deep = (truth_summary(simulate_stop(draw_stop(s))) for s in (14, 23))
+    assert held["past_peak_s"] == 0.0 and held["max_utilisation"] > 0.9
+    assert deep["past_peak_s"] > 0.5 * deep["duration_s"]
+
+
+def test_the_peak_shown_table_splits_the_abs_stops_by_the_truth():
+    rows = [_row(s, past_peak_s=1.0) for s in range(6)]
+    rows += [_row(s, past_peak_s=0.0, lugre_valid=0, lugre_mae=math.nan, lugre_valid_share=0.0) for s in range(6, 10)]
+    text = format_peak_shown(rows)
+    passed, short = text.splitlines()[1:3]
+    assert passed.split()[:6] == ["some", "wheel", "past", "its", "peak", "6"]
+    assert "any VALID 100.0 %" in passed and "MAE ok 100.0 %" in passed
+    assert short.split()[:6] == ["every", "wheel", "short", "of", "its", "peak"] and " 4 stops (40 %)" in short
+    assert "any VALID 0.0 %" in short and "false VALID 0 of 0" in short

@@ -191,6 +191,28 @@ _FAMILY_GROUPS: dict[str, Callable[[Row], str]] = {
 }
 
 
+def format_peak_shown(rows: Sequence[Row], p: str = "lugre") -> str:
+    """The ABS stops split by whether some wheel's slip went past its own peak slip (the truth's
+    `past_peak_s`), with targets 1–2 on each part: a stop whose wheels all stayed short of their
+    peaks (a slip target below it, an ABS releasing before it) shows its height to no estimator."""
+    ab = [r for r in abs_rows(rows) if "past_peak_s" in r]
+    lines = [f"== ABS stops by whether a wheel passed its peak ({ESTIMATORS[p]}) =="]
+    if not ab:
+        return "\n".join(lines + ["(rows without past_peak_s)"])
+    for label, part in (("some wheel past its peak", [r for r in ab if r["past_peak_s"] > 0.0]),
+                        ("every wheel short of its peak", [r for r in ab if r["past_peak_s"] <= 0.0])):
+        if not part:
+            lines.append(f"{label:32s} {0:5d} stops")
+            continue
+        any_valid = share(part, lambda r: r[f"{p}_valid"] > 0)
+        covered = share(part, lambda r: r[f"{p}_valid_share"] >= COVERAGE_OK)
+        false, valid = sum(r[f"{p}_false_valid"] for r in part), sum(r[f"{p}_valid"] for r in part)
+        lines.append(f"{label:32s} {len(part):5d} stops ({100 * len(part) / len(ab):.0f} %): "
+                     f"any VALID {100 * any_valid:.1f} %, MAE ok {100 * share(part, lambda r: mae_ok(r, p)):.1f} %, "
+                     f"VALID ≥ 80 % of span {100 * covered:.1f} %, false VALID {false} of {valid}")
+    return "\n".join(lines)
+
+
 def format_distributions(rows: Sequence[Row]) -> str:
     ab = abs_rows(rows)
     qs = (0.1, 0.5, 0.9, 0.99, 1.0)
@@ -288,5 +310,5 @@ def format_worst(rows: Sequence[Row], n: int, family: str | None = None, p: str 
 def full_report(rows: Sequence[Row], title: str, worst: int = 15, family: str | None = None,
                 stress: Stress | None = None) -> str:
     return "\n\n".join([format_targets(rows, title), format_comparison(rows), format_families(rows),
-                        format_not_valid(rows), format_distributions(rows),
+                        format_not_valid(rows), format_peak_shown(rows), format_distributions(rows),
                         format_worst(rows, worst, family, stress=stress)])

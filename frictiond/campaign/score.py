@@ -9,7 +9,8 @@ the estimator kept from VALID, by its reason (`not_valid`).
 Per stop, from the truth: the highest utilisation any wheel reached while braking 1 m/s above
 the ABS cut-out speed (`max_utilisation`; |F_x| / (μ_max F_z), with in a turn the lateral force's
 share of the tyre's lateral grip added by the friction ellipse): a stop that stayed below 0.8
-never showed the peak.
+never showed the peak; and how long some wheel's slip was past its own peak slip there
+(`past_peak_s`).
 """
 from __future__ import annotations
 
@@ -43,9 +44,15 @@ def truth_summary(stop: CampaignStop) -> dict[str, float]:
     fast = [r for r in braking if r["speed_mps"] > stop.spec.abs_cutout_mps + 1.0]
     util = max((max(r[f"utilisation_{w}"] for w in WHEELS) for r in fast), default=0.0)
     slip = max((max(r[f"slip_{w}"] for w in WHEELS) for r in fast), default=0.0)
+    # How long some wheel ran past its own peak slip: data that never do leave the peak's height
+    # unlocated (a slip target short of it, an ABS releasing below it), whatever the estimator.
+    times = [r["time_s"] for r in fast]
+    past = sum(t1 - t0 for t0, t1, r in zip(times, times[1:], fast)
+               if any(r[f"slip_{w}"] > r[f"slip_at_mu_max_{w}"] for w in WHEELS))
     return {
         "max_utilisation": float(util),
         "max_slip": float(slip),
+        "past_peak_s": round(float(past), 3),
         "truth_mu_mean": float(np.mean([r["mu_max"] for r in braking])) if braking else math.nan,
         "end_speed_mps": float(rows[-1]["speed_mps"]),
         "duration_s": float(rows[-1]["time_s"]),

@@ -194,7 +194,8 @@ _FAMILY_GROUPS: dict[str, Callable[[Row], str]] = {
 def format_peak_shown(rows: Sequence[Row], p: str = "lugre") -> str:
     """The ABS stops split by whether some wheel's slip went past its own peak slip (the truth's
     `past_peak_s`), with targets 1–2 on each part: a stop whose wheels all stayed short of their
-    peaks (a slip target below it, an ABS releasing before it) shows its height to no estimator."""
+    peaks (a slip target below it, an ABS releasing before it) bounds their height from below
+    only, closely only where a flat-topped curve was used within a few % of its grip."""
     ab = [r for r in abs_rows(rows) if "past_peak_s" in r]
     lines = [f"== ABS stops by whether a wheel passed its peak ({ESTIMATORS[p]}) =="]
     if not ab:

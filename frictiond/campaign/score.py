@@ -44,8 +44,9 @@ def truth_summary(stop: CampaignStop) -> dict[str, float]:
     fast = [r for r in braking if r["speed_mps"] > stop.spec.abs_cutout_mps + 1.0]
     util = max((max(r[f"utilisation_{w}"] for w in WHEELS) for r in fast), default=0.0)
     slip = max((max(r[f"slip_{w}"] for w in WHEELS) for r in fast), default=0.0)
-    # How long some wheel ran past its own peak slip: data that never do leave the peak's height
-    # unlocated (a slip target short of it, an ABS releasing below it), whatever the estimator.
+    # How long some wheel ran past its own peak slip: data that never do bound the peak's height
+    # from below only (a slip target short of it, an ABS releasing before it), closely only where
+    # the curve is flat-topped and the wheels came within a few % of their grip.
     times = [r["time_s"] for r in fast]
     past = sum(t1 - t0 for t0, t1, r in zip(times, times[1:], fast)
                if any(r[f"slip_{w}"] > r[f"slip_at_mu_max_{w}"] for w in WHEELS))

@@ -528,3 +528,23 @@ def test_the_peak_shown_table_splits_the_abs_stops_by_the_truth():
     assert "any VALID 100.0 %" in passed and "MAE ok 100.0 %" in passed
     assert short.split()[:6] == ["every", "wheel", "short", "of", "its", "peak"] and " 4 stops (40 %)" in short
     assert "any VALID 0.0 %" in short and "false VALID 0 of 0" in short
+
+
+def test_a_slow_dumping_abs_does_not_drag_the_speed_estimate_behind_the_car():
+    # Dev stop 23: a threshold ABS dumping slowly holds the front wheels at 0.7-1.0 slip and the
+    # rear ones at 0.5-0.57 for 2 s. Pulled towards the wheels, the estimate fell 6 % behind the
+    # car by 3.5 s and 26 % by 14 m/s; every slip read low with it. Now it may fall behind as an
+    # accelerometer's offset would drift it (0.1 m/s², 0.4 m/s over the 4 s to 12 m/s).
+    from frictiond.pipeline import Pipeline
+
+    stop = simulate_stop(draw_stop(23))
+    truth_t = np.array([r["time_s"] for r in stop.truth])
+    pipeline = Pipeline(stop.config("lugre-tr"))
+    worst = 0.0
+    for frame in stop.frames:
+        if pipeline.process(frame) and pipeline.last_sample is not None:
+            s = pipeline.last_sample
+            r = stop.truth[min(int(truth_t.searchsorted(s.time_s)), len(truth_t) - 1)]
+            if r["braking"] and r["speed_mps"] > 12.0:
+                worst = min(worst, s.speed_mps / r["speed_mps"] - 1.0)
+    assert -0.06 < worst < 0.0

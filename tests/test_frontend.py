@@ -152,6 +152,14 @@ def test_speed_estimate_without_reference_during_abs_like_slip():
     assert abs(s.speed_mps - true_speed) / true_speed < 0.12
 
 
+def _without_speed_reference(compiled: bool) -> FrontEnd:
+    """A front end for a car with no ground-speed sensor, on the compiled path or the Python one."""
+    fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})
+    if not compiled:
+        fe.core = None
+    return fe
+
+
 def _brake_with_front_slips(fe: FrontEnd, front_slip, accel_reads_more_mps2: float = 0.0, v0: float = 20.0,
                             decel: float = 6.0, seconds: float = 2.5, wheels_lost=(math.inf, math.inf),
                             rear_slip: float = 0.08) -> list[tuple[float, float]]:
@@ -181,9 +189,7 @@ def test_released_wheels_overshooting_the_car_do_not_ratchet_the_speed_up(compil
     # After each ABS release the front tyres, their force lagging their slip, carry the wheels
     # 5 % past the car's speed for 40 ms (every 0.25 s). Followed, each overshoot lifted the
     # estimate and nothing pulled it down again: slips read high for the rest of the stop.
-    fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})
-    if not compiled:
-        fe.core = None
+    fe = _without_speed_reference(compiled)
     errors = _brake_with_front_slips(fe, lambda t: -0.05 if (t - 0.5) % 0.25 < 0.04 else 0.08)
     assert errors and max(e for _, e in errors) < 0.05       # m/s at 20 → 5 m/s
     assert abs(errors[-1][1]) < 0.05
@@ -194,9 +200,7 @@ def test_wheels_that_stay_faster_than_the_speed_estimate_correct_it(compiled):
     # The accelerometer reads 0.5 m/s² more deceleration than the car's (an offset not learnt):
     # the estimate falls behind, and the front wheels, unbraked at the car's speed, stay faster
     # than it for longer than any overshoot lasts: the estimate follows them.
-    fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})
-    if not compiled:
-        fe.core = None
+    fe = _without_speed_reference(compiled)
     errors = _brake_with_front_slips(fe, lambda t: 0.0, accel_reads_more_mps2=0.5)
     late = [e for t, e in errors if t >= 1.5]
     assert late and max(abs(e) for e in late) < 0.1
@@ -209,9 +213,7 @@ def test_every_wheel_deep_in_slip_does_not_drag_the_speed_estimate_down(compiled
     # one wheel within. The accelerometer is right: the estimate may give way to the wheels no
     # faster than an accelerometer's offset could have drifted it (0.1 m/s², 0.25 m/s in
     # 2.5 s). Pulled to the bound, it fell 1.5 m/s behind, and every slip read low.
-    fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})
-    if not compiled:
-        fe.core = None
+    fe = _without_speed_reference(compiled)
     errors = _brake_with_front_slips(fe, lambda t: 0.8, rear_slip=0.55)
     assert errors and min(e for _, e in errors) > -0.3
 
@@ -221,9 +223,7 @@ def test_a_speed_estimate_restarted_from_a_slipping_wheel_is_corrected_by_the_re
     # Wheel speeds lost for 0.3 s while every wheel slips 8 %: the estimate restarts from the
     # fastest wheel, 8 % low. That error is the wheel's slip, not an accelerometer's drift: the
     # front wheels, released to the car's speed for 60 ms every 0.25 s, correct it at once.
-    fe = make(messages={k: v for k, v in MESSAGES.items() if k != "REF"})
-    if not compiled:
-        fe.core = None
+    fe = _without_speed_reference(compiled)
     errors = _brake_with_front_slips(fe, lambda t: 0.0 if (t - 0.5) % 0.25 < 0.06 else 0.08, wheels_lost=(1.2, 1.6))
     after = [e for t, e in errors if t >= 1.6]
     assert after[0] < -0.5                                  # (restarted low: the test sees the restart)

@@ -58,10 +58,10 @@ class SpeedEstimate:
                 # Braked wheels all read low during ABS: even the least-braked one slips by
                 # several percent, so pulling towards the fastest wheel biases the speed (and
                 # every slip) low. Pull only when the estimate would put even the fastest wheel
-                # beyond what an ABS lets it slip, and no faster than an accelerometer's offset
-                # drifts it (`speed_correction_rate`): an offset cannot make the estimate drift
-                # up without bound, yet a threshold ABS dumping slowly, which holds every wheel
-                # past that slip for seconds, cannot drag it (and every slip) down either.
+                # beyond what an ABS lets it slip, and then no faster than `speed_correction_rate`:
+                # that holds the drift of what free rolling left of the accelerometer's offset,
+                # yet a threshold ABS dumping slowly, which holds every wheel past that slip for
+                # seconds, cannot drag the estimate (and every slip) down with the wheels.
                 ceiling = fastest / (1.0 - opts.min_braked_slip)
                 if v > ceiling:
                     v -= min(opts.speed_gain_down * (v - ceiling), opts.speed_correction_rate * dt)

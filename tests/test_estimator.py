@@ -1001,3 +1001,19 @@ def test_a_lateral_mu_within_its_tolerance_of_nothing_is_doubted_on_ice():
     straight, turning = top(run_with(25.0, 0.0)), top(run_with(25.0, 0.03))
     assert straight > 0.9 and turning < 0.8
     assert not [e for e in run_with(25.0, 0.05) if e.status == Status.VALID]
+
+
+def test_below_the_evidence_speed_only_a_wheel_that_showed_its_peak_above_it_shows_it_again():
+    # On split μ one side's peak says nothing of the other's, and at walking pace the speed
+    # estimate's error alone spreads a held slip into a seeming peak.
+    est = LugreTrustRegionEstimator()
+    slow = est.options.peak_evidence_min_speed - 1.0
+    stats = (float(est._min_wheel_samples), 0.02, 0.12, 0.02, 0.12, 0.5, 1.0) + (1.0,) * 5
+    est._wheel_shown_moving = [True, False, False, False]
+
+    def verdict(wheel, peak_seen=True):
+        return est._wheel_verdict(wheel, stats, 0.8, 0.1, 0.8, False, slow, peak_seen, True)[0]
+
+    assert verdict(1) == "too slow to show a peak"
+    assert verdict(0) != "too slow to show a peak"
+    assert verdict(0, peak_seen=False) == "too slow to show a peak"

@@ -499,9 +499,6 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._slip_floor = [0.0] * N_WHEELS
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
-        # Each wheel's own peak shown at `peak_evidence_min_speed` or above, this stop and road
-        # (`_detect_jump` forgets it for a change of road detected above that speed).
-        self._wheel_shown_moving = [False] * N_WHEELS
         self._abs_seen_s = [-math.inf] * N_WHEELS
         self._speed_error = SpeedErrorBound(SpeedErrorOptions(
             o.speed_error_mps, o.speed_drift_mps2, o.speed_anchor_slip, o.excitation_window_s))
@@ -539,7 +536,6 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._body_mu.clear()
         self._excited_since_s = math.inf
         self._peak_seen_speed = 0.0
-        self._wheel_shown_moving = [False] * N_WHEELS
         self._forget_runaways()
         self._forget_shown_peaks()
         self._innovation_score = 0.0

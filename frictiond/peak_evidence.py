@@ -104,6 +104,7 @@ class PeakEvidence(RunawayEvidence):
         """Forget the peaks the wheels showed and each wheel's last verdict on spread slips (and
         when it was given): a new stop, or a new road, has shown nothing yet."""
         self._wheel_shown_s = [-math.inf] * N_WHEELS
+        self._wheel_shown_moving = [False] * N_WHEELS   # (shown at `peak_evidence_min_speed` or above)
         self._shape_proximity = [0.0] * N_WHEELS
         self._shape_verdict_s = [-math.inf] * N_WHEELS
         self._tops_fit = -1               # (`_wheel_tops` of the window this fit saw)

@@ -66,7 +66,7 @@ class RoadChangeTest:
         score = abs(mean) / (noise / math.sqrt(n_recent))
         return score if same_sign > 0.7 else min(score, o.jump_threshold)
 
-    def _detect_jump(self, now_s: float, score: float, speed: float) -> None:
+    def _detect_jump(self, now_s: float, score: float) -> None:
         """Drop the window's older samples when the newest ones disagree with the fit (a μ jump)."""
         o = self.options
         if score > o.jump_threshold * 2.0 and now_s - self._last_jump_s > o.jump_refractory_s:
@@ -85,10 +85,6 @@ class RoadChangeTest:
             self._measured_peaks = [0.0] * N_WHEELS
             self._band_ratio = 0.0
             self._forget_shown_peaks()   # (the peaks the wheels showed were the old road's)
-            if speed >= o.peak_evidence_min_speed:
-                # The new road's peak is then to be shown above that speed, as a stop's first.
-                # (Detected at walking pace, a change is no surer than a peak shown there.)
-                self._wheel_shown_moving = [False] * N_WHEELS
 
 
 def residual_bias(resid: np.ndarray) -> tuple[float, float, float]:

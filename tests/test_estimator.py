@@ -1017,17 +1017,3 @@ def test_below_the_evidence_speed_only_a_wheel_that_showed_its_peak_above_it_sho
     assert verdict(1) == "too slow to show a peak"
     assert verdict(0) != "too slow to show a peak"
     assert verdict(0, peak_seen=False) == "too slow to show a peak"
-
-
-def test_a_change_of_road_above_the_evidence_speed_forgets_the_peaks_shown_there_one_below_does_not():
-    # The new road's peak is to be shown above that speed, as a stop's first; a change detected
-    # at walking pace is no surer than a peak shown there (the built-in dry Burckhardt stop found
-    # one at 3.4 m/s that was not there).
-    est = LugreTrustRegionEstimator()
-    score = 3.0 * est.options.jump_threshold
-    fast, slow = est.options.peak_evidence_min_speed + 1.0, est.options.peak_evidence_min_speed - 1.0
-    est._wheel_shown_moving = [True] * 4
-    est._detect_jump(10.0, score, slow)
-    assert est._jumps == 1 and est._wheel_shown_moving == [True] * 4
-    est._detect_jump(20.0, score, fast)
-    assert est._jumps == 2 and est._wheel_shown_moving == [False] * 4

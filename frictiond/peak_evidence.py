@@ -219,7 +219,7 @@ class PeakEvidence(RunawayEvidence):
         if n < self._min_wheel_samples:
             return "few samples", 0.0, True
         if speed < o.peak_evidence_min_speed and not (peak_seen and self._wheel_shown_moving[wheel]):
-            # Below it only a wheel that showed its own peak above it this stop may show it
+            # Below it only a wheel that showed its own peak above it on this road may show it
             # again: on split μ the other side's peak says nothing of this wheel's, and at walking
             # pace the speed estimate's error alone spreads a held slip into a seeming peak (dev
             # stop 381 braked 0.15 s after start-up, the offset unlearnt: the dry side's slips

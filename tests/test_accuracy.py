@@ -33,7 +33,9 @@ LIMITS = {
     # A runaway must run on to lock-up (or an ABS release it) before it counts: the first evidence
     # a cycle later moves the fits after it by 0.0002 (MAE 0.0299 → 0.0301 over the same outputs).
     # (VALID from σ ≤ 0.099, the threshold's: 0.922 of the span, was 0.95.)
-    "dry/burckhardt": (0.031, 0.035, 0.9, 0.3, None),
+    # (A change of road found at 3.4 m/s, not there, leaves the last 0.4 s CONVERGING: below
+    # 5 m/s no wheel shows the new road's peak. 0.873 of the span.)
+    "dry/burckhardt": (0.031, 0.035, 0.87, 0.3, None),
     "dry/ref": (0.035, 0.04, 0.95, 0.3, None),
     "wet": (0.03, 0.05, 0.95, 0.3, None),
     # The MF curve on wet asphalt: a late jump of the fit (~6 % at 3 s, low speed) costs ~0.1 s of VALID.

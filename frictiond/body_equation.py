@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import math
 
-from .free_rolling_offset import UNLEARNT_ACCEL_TOLERANCE_MPS2, FreeRollingOffset, spread_variance
-from .pressure_lag import PRESSURE_SENSOR_LAG_S, PressureLag
+from .free_rolling_offset import (FREE_ROLLING_STATE, UNLEARNT_ACCEL_TOLERANCE_MPS2, FreeRollingOffset,
+                                  spread_variance)
+from .pressure_lag import PRESSURE_LAG_STATE, PRESSURE_SENSOR_LAG_S, PressureLag
 
 _BRAKE_GAIN_PRIOR_WEIGHT = 10 * 1000.0**2   # ten samples at 1 kN·m saying brake gain 1
 _BRAKE_MODEL_MARGIN = 1.25                  # "far outside the gain limits": beyond them by this factor
@@ -50,12 +51,10 @@ _COASTING_STATE = ("_rolling_offset_mps2", "_rolling_offset_samples", "_rolling_
 # ... what the front end learns from each sample (`_compute_sample` on both paths): a suspect sample
 # must not teach it (a corrupted wheel speed's inertia torque moved the brake gain by 10 %).
 LEARNT_STATE = ("_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_gain_sum_w",
-                 "_sensed_needed_nm", "_sensed_needed_time_s",
                  "_sensor_offset_mps2", "_sensor_offset_doubt_mps2", "_recent_weight_nm", "_recent_needed_nm",
                  "_recent_brake_nm", "_recent_lag_nm", "_last_brake_nm", "_brake_released", "_brake_gain_factor",
-                 "_brake_gain_doubt",
-                 "_brake_model_holds", "_unjudged_s", "_accel_bias_mps2", "_accel_bias_samples", "_accel_bias_m2",
-                 "_lag_state", "_resistance_doubt_sum_n", "_tyre_force_sum_n") + _COASTING_STATE
+                 "_brake_gain_doubt", "_brake_model_holds", "_unjudged_s", "_resistance_doubt_sum_n",
+                 "_tyre_force_sum_n") + PRESSURE_LAG_STATE + FREE_ROLLING_STATE + _COASTING_STATE
 
 
 class BodyEquation(PressureLag, FreeRollingOffset):
@@ -147,7 +146,7 @@ class BodyEquation(PressureLag, FreeRollingOffset):
             where += f"; coasting showed {shown:+.2f} ± {width:.2f}"
         note = (f"brake gain {self._brake_gain_factor:.2f} ± {self._brake_gain_doubt:.2f} of the configured "
                 f"(pads, load); accelerometer offset {offset:+.2f} ± {doubt:.2f} m/s² ({where}); "
-                f"pressure lag {1e3 * self._lag_state[5]:.0f} ms")
+                f"pressure lag {1e3 * self.pressure_lag_s:.0f} ms")
         if not level and abs(offset) >= tolerance and doubt >= tolerance:
             note += (" — the offset at its tolerance's edge: a sensor reading further off (say so, "
                      "frontend.accel_offset_tolerance) or pressures off by a factor")
@@ -225,7 +224,7 @@ class BodyEquation(PressureLag, FreeRollingOffset):
         veh = self.vehicle
         decel = -accel_long
         raw_brake, raw_rate = sum(brake_torques), sum(brake_rates)
-        total_brake = max(raw_brake + self._lag_state[5] * raw_rate, 0.0)   # (advanced by the lag learnt)
+        total_brake = max(raw_brake + self.pressure_lag_s * raw_rate, 0.0)   # (advanced by the lag learnt)
         brake_rate = (total_brake - self._last_brake_nm) / self.sample_period_s
         self._last_brake_nm = total_brake
         # The verdict is on the last ~0.2 s of braking: after as long with no sample judged (brakes

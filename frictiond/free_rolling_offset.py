@@ -21,6 +21,8 @@ ACCEL_BIAS_LEARNT_SAMPLES = 50
 # their spread taken with a prior of this many samples spread by the tolerance above (two or three
 # samples that happen to agree do not make an offset known). (Also in _frontcore.c.)
 ACCEL_BIAS_PRIOR_SAMPLES = 2.0
+# What free rolling's learning keeps from sample to sample (in `body_equation.LEARNT_STATE`).
+FREE_ROLLING_STATE = ("_accel_bias_mps2", "_accel_bias_samples", "_accel_bias_m2")
 
 
 class FreeRollingOffset:

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import math
 
-# ... and while the brakes' torque moves, what a pressure sensor trailing it by this long misses
-# (a pedal applied at 1,500 bar/s, an ABS dump: tens of bar).
+# While the brakes' torque moves, what a pressure sensor trailing it by this long misses (a pedal
+# applied at 1,500 bar/s, an ABS dump: tens of bar): the body check allows for that much.
 PRESSURE_SENSOR_LAG_S = 0.04
 # The pressure sensors' own lag, identified from the body equation (`_learn_pressure_lag`), is
 # taken as at most this (a first-order lag of a few tens of ms; more would be a broken sensor),
@@ -27,6 +27,8 @@ MAX_PRESSURE_LAG_S = 0.05
 MIN_PRESSURE_LAG_S = 0.002
 PRESSURE_LAG_TIME_CONSTANT_S = 5.0
 _PRESSURE_LAG_PRIOR = 10 * 10_000.0**2
+# What the lag's learning keeps from sample to sample (in `body_equation.LEARNT_STATE`).
+PRESSURE_LAG_STATE = ("_sensed_needed_nm", "_sensed_needed_time_s", "_lag_state")
 
 
 class PressureLag:

@@ -171,7 +171,7 @@ class SamplePhysics:
                                     speed, inertia_torques, brake_torques, drive, wheel_linear, brake_rates, braking)
         gain = self._brake_gain_factor
         # A sensor lagging by τ reads p(t) − τ·ṗ(t): the brakes' torque is the reading advanced by τ.
-        lag = self._lag_state[5]
+        lag = self.pressure_lag_s
         brake_torques = [max(b + lag * r, 0.0) for b, r in zip(brake_torques, brake_rates)]   # (NaN stays NaN)
         radius = veh.wheel_radius
         return [(inertia_torques[i] + gain * brake_torques[i] - drive[i]) / radius for i in range(4)]

@@ -555,6 +555,7 @@ def test_no_wheel_shows_a_peak_at_walking_pace_that_it_did_not_show_above_it():
     # controller holding 0.11, the accelerometer's offset not yet learnt. The ice side showed its
     # peak; below 5 m/s the speed estimate was 6 % low and the dry side's held slips seemed to
     # show one too: VALID from 3.2 m/s to the stop, 27 % low, all 103 outputs false.
+    from frictiond import not_valid
     from frictiond.campaign.draw import with_pre_roll
     from frictiond.campaign.score import estimator_scores
     from frictiond.replay import estimates_of
@@ -564,4 +565,4 @@ def test_no_wheel_shows_a_peak_at_walking_pace_that_it_did_not_show_above_it():
     scores = estimator_scores(estimates, stop.truth)
     assert scores["false_valid"] == 0 and scores["valid"] == 0
     # (the dry side was held back below 5 m/s for want of its own peak shown above it)
-    assert pipeline.stats.estimator_not_valid["μ_max leans on wheels that have not shown their peak"] > 0
+    assert pipeline.stats.estimator_not_valid[not_valid.UNSHOWN_WHEELS] > 0

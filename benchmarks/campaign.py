@@ -2,9 +2,10 @@
 
     .venv/bin/python benchmarks/campaign.py [--stops 1000] [--set held-out|dev|both] [--workers N]
         [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--clean-sensors] [--pre-roll S] [--grade G]
-        [--payload KG] [--accel-offset A] [--cruise-lift S] [--save FILE.json|.parquet] [--worst 15]
+        [--payload KG] [--accel-offset A] [--cruise-lift S] [--tyre-model tmeasy] [--save FILE.json|.parquet]
+        [--worst 15]
     .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--clean-sensors] [--pre-roll S]
-        [--grade G] [--payload KG] [--accel-offset A] [--cruise-lift S] [--write-log DIR]
+        [--grade G] [--payload KG] [--accel-offset A] [--cruise-lift S] [--tyre-model tmeasy] [--write-log DIR]
 
 Each stop is drawn from its seed (`frictiond.campaign.draw`, ranges in its docstring): a car,
 tyres (Burckhardt or Magic Formula, never the estimator's LuGre), an ABS family, sensors and a
@@ -25,7 +26,9 @@ gives every accelerometer an offset of size A (its drawn sign kept; drawn: 0–0
 car, a sensor mounted tilted, beyond the ranges the estimator was tuned on. `--cruise-lift S`
 drives every car at a steady speed, with no drive torque on the bus, until S seconds before its
 brakes, where the draw has it coast: the engine's push then reads like an accelerometer offset to
-what coasting teaches (`frontend.coasting_offset`).
+what coasting teaches (`frontend.coasting_offset`). `--tyre-model tmeasy` replaces every road's
+tyre by Rill's TMeasy curve of the same peak μ, its shape drawn from the seed: a tyre none of the
+estimator's development saw.
 Printed: the issue's targets with PASS/FAIL per estimator, the comparison, a table per family,
 distributions, and the worst stops each with the command that reproduces it.
 """
@@ -38,7 +41,7 @@ import os
 import sys
 import time
 
-from frictiond.campaign.draw import Stress, draw_stop, seeds_for
+from frictiond.campaign.draw import STRESS_TYRE_MODELS, Stress, draw_stop, seeds_for
 from frictiond.campaign.logs import replay_commands, write_stop_files
 from frictiond.campaign.report import full_report, reason
 from frictiond.campaign.run import run_campaign, save_rows
@@ -95,6 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cruise-lift", type=float, default=None, metavar="S", help="every car driven at a "
                         "steady speed, no drive torque on the bus, until S seconds before the brakes "
                         "(default: it coasts)")
+    parser.add_argument("--tyre-model", default=None, choices=STRESS_TYRE_MODELS, help="every road's tyre "
+                        "replaced by this truth curve of the same peak μ, its shape drawn from the seed "
+                        "(tmeasy: Rill's TMeasy, a shape the estimator was never developed on)")
     parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
     parser.add_argument("--worst", type=int, default=15)
     parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
@@ -103,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         stress = Stress(args.clean_sensors, args.pre_roll, args.grade, args.payload, args.accel_offset,
-                        args.cruise_lift)
+                        args.cruise_lift, args.tyre_model)
     except ValueError as exc:
         parser.error(str(exc).replace("pre_roll_s", "--pre-roll").replace("payload_kg", "--payload")
                      .replace("accel_offset_mps2", "--accel-offset").replace("grade", "--grade")

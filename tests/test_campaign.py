@@ -19,7 +19,7 @@ from frictiond.campaign.run import load_rows, run_campaign, save_rows
 from frictiond.campaign.score import truth_summary
 from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, REAR_WHEEL_MESSAGE, WHEEL_MESSAGE
 from frictiond.campaign.simulate import simulate_stop
-from frictiond.campaign.tyres import BURCKHARDT_SURFACES, TyreCurve
+from frictiond.campaign.tyres import BURCKHARDT_SURFACES, TyreCurve, scalar_model
 from frictiond.campaign.vehicle import GRAVITY_MPS2
 
 CAMPAIGN = Path(draw_mod.__file__).parent
@@ -566,3 +566,50 @@ def test_no_wheel_shows_a_peak_at_walking_pace_that_it_did_not_show_above_it():
     assert scores["false_valid"] == 0 and scores["valid"] == 0
     # (the dry side was held back below 5 m/s for want of its own peak shown above it)
     assert pipeline.stats.estimator_not_valid[not_valid.UNSHOWN_WHEELS] > 0
+
+
+def test_tmeasy_curve_rises_to_its_peak_falls_to_sliding_and_its_scalar_model_agrees():
+    # Rill's TMeasy: the initial slope dF0, a zero slope at the peak (s_M, F_M), a cubic fall to
+    # F_S reached with zero slope at s_S, flat beyond; the 1 kHz integration's floats the same.
+    d_f0, s_m, f_m, s_s, f_s = 20.0, 0.12, 0.9, 0.6, 0.6
+    curve = TyreCurve("tmeasy", (d_f0, s_m, f_m, s_s, f_s))
+    lam = np.linspace(0.0, 1.0, 2001)
+    mu = curve.base(lam)
+    assert curve.peak == pytest.approx((f_m, s_m), abs=1e-3)
+    assert (mu[1] - mu[0]) / (lam[1] - lam[0]) == pytest.approx(d_f0, rel=0.02)
+    assert np.all(np.diff(mu[lam <= s_m]) > 0) and np.all(np.diff(mu[(lam >= s_m) & (lam <= s_s)]) < 0)
+    assert np.all(mu[lam >= s_s] == pytest.approx(f_s))
+    model = scalar_model(dataclasses.replace(curve, speed_slope=0.1))
+    for slip in (0.01, 0.5 * s_m, s_m, 0.3, s_s, 0.9):
+        value, slope = model(slip, 20.0)
+        h = 1e-6
+        numeric = (model(slip + h, 20.0)[0] - model(slip - h, 20.0)[0]) / (2 * h)
+        assert value == pytest.approx(float(dataclasses.replace(curve, speed_slope=0.1).mu(slip, 20.0)))
+        assert slope == pytest.approx(numeric, abs=1e-4)
+    assert model(-0.05, 20.0)[0] == pytest.approx(-model(0.05, 20.0)[0])
+
+
+def test_a_tmeasy_stress_run_keeps_each_road_s_grip_and_changes_its_shape():
+    # `--tyre-model tmeasy`: the stop as drawn, every road's tyre a TMeasy curve of the same peak
+    # μ, its shape drawn from the seed (the same every time), the family named for it.
+    for seed in (1, 5, 28):
+        drawn, stressed = draw_stop(seed), draw_stop(seed, tyre_model="tmeasy")
+        assert stressed == draw_stop(seed, tyre_model="tmeasy")
+        assert stressed.tyre_family == "tmeasy" and stressed.family.split("/")[1] == "tmeasy"
+        assert len(stressed.surfaces) == len(drawn.surfaces)
+        for old, new in zip(drawn.surfaces, stressed.surfaces):
+            assert new.kind == "tmeasy" and new.label == "tm-" + old.label
+            assert new.peak[0] == pytest.approx(old.peak[0], rel=1e-3)
+            assert new.speed_slope == old.speed_slope
+            d_f0, s_m, f_m, s_s, f_s = new.params
+            assert 0.05 <= s_m <= 0.30 and d_f0 * s_m / f_m >= 1.5 - 1e-9 and 0.55 * f_m <= f_s <= 0.95 * f_m
+            lam = np.linspace(0.0, 1.0, 101)
+            assert np.max(np.abs(new.base(lam) - old.base(lam))) > 0.05 * old.peak[0]   # another shape
+        assert dataclasses.replace(stressed, tyre_family=drawn.tyre_family, surfaces=drawn.surfaces) == drawn
+    with pytest.raises(ValueError, match="tyre_model"):
+        draw_stop(3, tyre_model="lugre")
+    stress = Stress(tyre_model="tmeasy")
+    assert " --tyre-model tmeasy " in reproduce_command({"seed": 3}, None, stress) + " "
+    assert stress.describe() == ", every tyre a tmeasy curve"
+    rows = run_campaign([5], workers=0, stress=stress)
+    assert rows[0]["tyre"] == "tmeasy" and rows[0]["surfaces"].startswith("tm-") and not rows[0]["sim_error"]

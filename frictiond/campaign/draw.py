@@ -78,7 +78,7 @@ import numpy as np
 
 from .abs_control import ABS_FAMILIES
 from .sensors import SensorSpec
-from .tyres import BURCKHARDT_SURFACES, TyreCurve, magic_formula_plausible, slip_for_force
+from .tyres import BURCKHARDT_SURFACES, TyreCurve, magic_formula_plausible, slip_for_force, tmeasy_like
 from .vehicle import GRAVITY_MPS2, CarSpec, lock_pressure_bar
 
 HELD_OUT_BASE = 1_000_000
@@ -93,6 +93,8 @@ MAX_GRADE = 0.08             # rise over run, either way: a steep main road
 MAX_GRADE_SET = 0.3          # ... and what a stress run may set (`Stress.grade`)
 MAX_PAYLOAD_SET_KG = 2000.0  # what a stress run may put aboard (`Stress.payload_kg`)
 MAX_ACCEL_OFFSET_SET = 2.0   # ... and the accelerometer's offset it may set (`Stress.accel_offset_mps2`)
+STRESS_TYRE_MODELS = ("tmeasy",)   # the truth tyres a stress run may put in place of the draw's
+TMEASY_STREAM = 0x7E           # (the TMeasy shapes' random stream, apart from the draw's six)
 
 
 @dataclass(frozen=True)
@@ -317,7 +319,9 @@ class Stress:
     the size of the accelerometer's offset (its drawn sign kept). The last two probe beyond the
     draw's ranges (0–120 kg, 0–0.3 m/s²): a loaded car, a sensor mounted tilted. `cruise_lift_s`:
     the car driven at a steady speed (no drive torque on the bus) until this long before the brakes,
-    where the draw has it coast (`StopSpec.driven_until_s`)."""
+    where the draw has it coast (`StopSpec.driven_until_s`). `tyre_model`: "tmeasy", every road's
+    tyre replaced by a TMeasy curve of the same peak μ (`tyres.tmeasy_like`, its shape drawn from
+    the seed), a shape the estimator was never developed on."""
 
     clean_sensors: bool = False
     pre_roll_s: float | None = None
@@ -325,6 +329,7 @@ class Stress:
     payload_kg: float | None = None
     accel_offset_mps2: float | None = None
     cruise_lift_s: float | None = None
+    tyre_model: str | None = None
 
     def __post_init__(self) -> None:
         if self.pre_roll_s is not None and not self.pre_roll_s >= 0.0:
@@ -338,6 +343,8 @@ class Stress:
                              f"not {self.accel_offset_mps2}")
         if self.cruise_lift_s is not None and not self.cruise_lift_s >= 0.0:
             raise ValueError(f"cruise_lift_s must be ≥ 0, not {self.cruise_lift_s}")
+        if self.tyre_model not in (None,) + STRESS_TYRE_MODELS:
+            raise ValueError(f"tyre_model must be one of {', '.join(STRESS_TYRE_MODELS)}, not {self.tyre_model!r}")
 
     def apply(self, spec: StopSpec) -> StopSpec:
         """`spec` with these settings (`clean_sensors` is `draw_stop`'s, before the drive is drawn)."""
@@ -352,6 +359,9 @@ class Stress:
         spec = spec if self.pre_roll_s is None else with_pre_roll(spec, self.pre_roll_s)
         if self.cruise_lift_s is not None:
             spec = replace(spec, driven_until_s=max(spec.pre_roll_s - float(self.cruise_lift_s), 0.0))
+        if self.tyre_model == "tmeasy":
+            shapes = np.random.default_rng([spec.seed, TMEASY_STREAM])
+            spec = replace(spec, tyre_family="tmeasy", surfaces=tuple(tmeasy_like(c, shapes) for c in spec.surfaces))
         return spec
 
     def flags(self) -> str:
@@ -361,7 +371,8 @@ class Stress:
                         f" --grade {self.grade:g}" if self.grade is not None else "",
                         f" --payload {self.payload_kg:g}" if self.payload_kg is not None else "",
                         f" --accel-offset {self.accel_offset_mps2:g}" if self.accel_offset_mps2 is not None else "",
-                        f" --cruise-lift {self.cruise_lift_s:g}" if self.cruise_lift_s is not None else ""])
+                        f" --cruise-lift {self.cruise_lift_s:g}" if self.cruise_lift_s is not None else "",
+                        f" --tyre-model {self.tyre_model}" if self.tyre_model is not None else ""])
 
     def describe(self) -> str:
         """These settings for a report's title (", clean sensors, on a grade of 0.04", or "")."""
@@ -372,7 +383,8 @@ class Stress:
                         f", accelerometer offset ±{self.accel_offset_mps2:g} m/s²"
                         if self.accel_offset_mps2 is not None else "",
                         f", driven until {self.cruise_lift_s:g} s before the brakes"
-                        if self.cruise_lift_s is not None else ""])
+                        if self.cruise_lift_s is not None else "",
+                        f", every tyre a {self.tyre_model} curve" if self.tyre_model is not None else ""])
 
 
 def draw_stop(seed: int, family: str | None = None, stress: Stress | None = None, **settings: Any) -> StopSpec:

@@ -1,7 +1,8 @@
 """Truth tyre models of the campaign, independent of the estimator's (no LuGre here, on purpose).
 
 A tyre curve is separable: μ(λ, v) = base(λ) · m(v), with `base` a Burckhardt or Magic Formula
-curve in slip and `m(v)` a linear speed factor of either sign. Separable
+curve in slip (or, for the stress run `Stress.tyre_model`, Rill's TMeasy curve: `tmeasy_like`)
+and `m(v)` a linear speed factor of either sign. Separable
 keeps the truth cheap: the peak over slip at any speed is the base curve's peak times m(v), and
 its slip does not move with speed. The estimator's LuGre model makes the peak move with speed;
 a truth that does not is one of the mismatches the campaign is there to show.
@@ -38,8 +39,8 @@ SLIP_GRID = np.linspace(0.0, 1.0, 1001)
 
 @dataclass(frozen=True, slots=True)
 class TyreCurve:
-    """One tyre on one surface: `kind` is "burckhardt" or "magic-formula"; `params` its
-    coefficients, (c1, c2, c3) or (B, C, D, E); `speed_slope` k of m(v) = 1 + k (v − 15)/15;
+    """One tyre on one surface: `kind` is "burckhardt", "magic-formula" or "tmeasy"; `params` its
+    coefficients, (c1, c2, c3), (B, C, D, E) or (dF0, s_M, F_M, s_S, F_S) (`tmeasy_base`); `speed_slope` k of m(v) = 1 + k (v − 15)/15;
     `label` names the surface it was drawn around (for the tables)."""
 
     kind: str
@@ -56,6 +57,8 @@ class TyreCurve:
             b, c, d, e = self.params
             x = b * lam
             return d * np.sin(c * np.arctan(x - e * (x - np.arctan(x))))
+        if self.kind == "tmeasy":
+            return tmeasy_base(lam, *self.params)
         raise ValueError(f"unknown tyre kind {self.kind!r}")
 
     def speed_factor(self, speed_mps: np.ndarray | float) -> np.ndarray:
@@ -99,6 +102,35 @@ def magic_formula_plausible(params: tuple[float, float, float, float]) -> bool:
     return bool(np.min(mu[k:]) >= 0.25 * d and np.all(np.diff(mu[: k + 1]) >= -1e-9))
 
 
+def tmeasy_base(slip: np.ndarray, d_f0: float, s_m: float, f_m: float, s_s: float, f_s: float) -> np.ndarray:
+    """Rill's TMeasy longitudinal curve over F_z (G. Rill, "Road Vehicle Dynamics", 2012, ch. 3):
+    from the initial slope `d_f0` a rational rise to the peak `f_m` at slip `s_m`, where its
+    slope is 0; a cubic fall to the sliding level `f_s`, reached with zero slope at `s_s`; then
+    flat. Its pieces are none of the estimator's or the campaign's other shapes: a tyre the
+    estimator was never tuned on."""
+    lam = np.asarray(slip, dtype=float)
+    sigma = lam / s_m
+    rise = d_f0 * lam / (1.0 + sigma * (sigma + d_f0 * s_m / f_m - 2.0))
+    u = np.clip((lam - s_m) / (s_s - s_m), 0.0, 1.0)
+    fall = f_m - (f_m - f_s) * u * u * (3.0 - 2.0 * u)
+    return np.where(lam <= s_m, rise, fall)
+
+
+def tmeasy_like(curve: TyreCurve, rng: np.random.Generator) -> TyreCurve:
+    """A TMeasy tyre with `curve`'s peak μ, speed factor and label (prefixed "tm-"), its shape
+    drawn: the peak's slip that of `curve` within 0.05–0.30 (0.05–0.15 for a curve still rising at
+    lock, Burckhardt's ice); the initial slope the tyre's longitudinal stiffness over its load,
+    12–30 whatever the road (a property of the tyre), at least 1.5 times the secant to the peak (a
+    round top; on ice a sharp knee far below the peak's slip); the sliding level 55–95 % of the
+    peak, reached at slip 0.35–0.9."""
+    f_m, s_peak = curve.peak
+    s_m = float(np.clip(s_peak, 0.05, 0.30)) if s_peak < 0.9 else float(rng.uniform(0.05, 0.15))
+    d_f0 = max(float(rng.uniform(12.0, 30.0)), 1.5 * f_m / s_m)
+    s_s = float(rng.uniform(max(1.5 * s_m + 0.05, 0.35), 0.9))
+    f_s = float(rng.uniform(0.55, 0.95)) * f_m
+    return TyreCurve("tmeasy", (d_f0, s_m, f_m, s_s, f_s), curve.speed_slope, "tm-" + curve.label)
+
+
 def slip_for_force(curve: TyreCurve, mu_wanted: float, speed_mps: float) -> float:
     """Smallest slip where the curve reaches `mu_wanted` (the peak's slip if it never does)."""
     mu = curve.mu(SLIP_GRID, speed_mps)
@@ -127,6 +159,19 @@ def scalar_model(curve: TyreCurve) -> Callable[[float, float], tuple[float, floa
         def base(lam: float) -> tuple[float, float]:
             e = math.exp(-c2 * lam)
             return c1 * (1.0 - e) - c3 * lam, c1 * c2 * e - c3
+    elif curve.kind == "tmeasy":
+        d_f0, s_m, f_m, s_s, f_s = curve.params
+        knee = d_f0 * s_m / f_m - 2.0
+
+        def base(lam: float) -> tuple[float, float]:
+            if lam <= s_m:
+                sigma = lam / s_m
+                den = 1.0 + sigma * (sigma + knee)
+                return d_f0 * lam / den, d_f0 * (1.0 - sigma * sigma) / (den * den)
+            if lam >= s_s:
+                return f_s, 0.0
+            u = (lam - s_m) / (s_s - s_m)
+            return f_m - (f_m - f_s) * u * u * (3.0 - 2.0 * u), -(f_m - f_s) * 6.0 * u * (1.0 - u) / (s_s - s_m)
     else:
         b, c, d, e_ = curve.params
 
@@ -152,5 +197,5 @@ def relaxation_time_s(length_m: float, speed_mps: float) -> float:
     return length_m / max(speed_mps, 0.5) if length_m > 0 else 0.0
 
 
-__all__ = ["BURCKHARDT_SURFACES", "TyreCurve", "magic_formula_plausible", "slip_for_force",
-           "scalar_model", "scalar_speed_factor", "relaxation_time_s"]
+__all__ = ["BURCKHARDT_SURFACES", "TyreCurve", "magic_formula_plausible", "slip_for_force", "tmeasy_base",
+           "tmeasy_like", "scalar_model", "scalar_speed_factor", "relaxation_time_s"]

@@ -613,3 +613,18 @@ def test_a_tmeasy_stress_run_keeps_each_road_s_grip_and_changes_its_shape():
     assert stress.describe() == ", every tyre a tmeasy curve"
     rows = run_campaign([5], workers=0, stress=stress)
     assert rows[0]["tyre"] == "tmeasy" and rows[0]["surfaces"].startswith("tm-") and not rows[0]["sim_error"]
+
+
+def test_a_select_low_rear_axle_brakes_both_rear_wheels_with_one_pressure():
+    # `--rear-select-low`: one valve for the rear axle, the command of the wheel asking for less.
+    # On split μ (stop 26: wet asphalt | snow, a deceleration-triggered ABS) the rear wheel on the
+    # wet side then stays at the snow side's pressure, short of its own limit.
+    assert draw_stop(26).manoeuvre == "split" and draw_stop(26).abs_family == "b-decel"
+    free, low = (simulate_stop(draw_stop(26, rear_select_low=s)).truth for s in (False, True))
+    assert max(abs(r["brake_pressure_rl"] - r["brake_pressure_rr"]) for r in free) > 5.0
+    assert all(r["brake_pressure_rl"] == r["brake_pressure_rr"] for r in low)
+    assert any(r["brake_pressure_rl"] > 1.0 for r in low)
+    assert max(r["utilisation_rl"] for r in low if r["braking"]) < max(r["utilisation_rl"] for r in free if r["braking"])
+    stress = Stress(rear_select_low=True)
+    assert " --rear-select-low " in reproduce_command({"seed": 3}, None, stress) + " "
+    assert stress.describe() == ", the rear axle's ABS select-low"

@@ -21,6 +21,11 @@ Families (`ABS_FAMILIES`):
   `target_cap`, ≤ 0.12): a modern system that rarely crosses the peak; on flat-topped dry curves
   the slip stays ≤ ~0.12 and μ within a few per cent of the peak.
 - "d-none": no ABS intervention: the driver's moderate pressure all the way to standstill.
+
+Any family may regulate the rear axle "select-low" (`params["rear_select_low"]` ≥ 0.5, the stress
+run `Stress.rear_select_low`): one valve for both rear wheels, which get the command of the wheel
+asking for less pressure, as most production ABS does to keep the car straight. The rear wheel on
+more grip is then braked short of its limit, and the axle's two wheels see one pressure.
 """
 from __future__ import annotations
 
@@ -70,7 +75,10 @@ class AbsController:
             self._controlling = [False] * 4
             return [WheelCommand(driver_bar, self.params.get("apply_rate", 1500.0)) for _ in range(4)]
         step = {"a-threshold": self._threshold, "b-decel": self._decel, "c-slip": self._slip_control}[self.family]
-        return [step(i, t, slip[i], pressure_bar[i], driver_bar, peak_slip[i]) for i in range(4)]
+        commands = [step(i, t, slip[i], pressure_bar[i], driver_bar, peak_slip[i]) for i in range(4)]
+        if self.params.get("rear_select_low", 0.0) >= 0.5:
+            commands[2] = commands[3] = _select_low(commands[2], commands[3])
+        return commands
 
     def _measure_accel(self, omega: Sequence[float], radius_m: float, speed_mps: float) -> None:
         """Circumferential wheel accelerations relative to the car's [m/s²], differenced over the
@@ -152,3 +160,9 @@ class AbsController:
             pc = 0.5 * p
         self._p_ctrl[i] = min(max(pc, 1.0), driver)
         return WheelCommand(self._p_ctrl[i], prm["valve_rate"], True)
+
+
+def _select_low(left: WheelCommand, right: WheelCommand) -> WheelCommand:
+    """One valve for an axle: the command asking for the lower pressure, active if either is."""
+    low = left if left.target_bar <= right.target_bar else right
+    return WheelCommand(low.target_bar, low.rate_bps, left.active or right.active)

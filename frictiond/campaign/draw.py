@@ -321,7 +321,8 @@ class Stress:
     the car driven at a steady speed (no drive torque on the bus) until this long before the brakes,
     where the draw has it coast (`StopSpec.driven_until_s`). `tyre_model`: "tmeasy", every road's
     tyre replaced by a TMeasy curve of the same peak μ (`tyres.tmeasy_like`, its shape drawn from
-    the seed), a shape the estimator was never developed on."""
+    the seed), a shape the estimator was never developed on. `rear_select_low`: the ABS regulates
+    the rear axle select-low (`abs_control`), one pressure for both rear wheels."""
 
     clean_sensors: bool = False
     pre_roll_s: float | None = None
@@ -330,6 +331,7 @@ class Stress:
     accel_offset_mps2: float | None = None
     cruise_lift_s: float | None = None
     tyre_model: str | None = None
+    rear_select_low: bool = False
 
     def __post_init__(self) -> None:
         if self.pre_roll_s is not None and not self.pre_roll_s >= 0.0:
@@ -362,6 +364,8 @@ class Stress:
         if self.tyre_model == "tmeasy":
             shapes = np.random.default_rng([spec.seed, TMEASY_STREAM])
             spec = replace(spec, tyre_family="tmeasy", surfaces=tuple(tmeasy_like(c, shapes) for c in spec.surfaces))
+        if self.rear_select_low:
+            spec = replace(spec, abs_params={**spec.abs_params, "rear_select_low": 1.0})
         return spec
 
     def flags(self) -> str:
@@ -372,7 +376,8 @@ class Stress:
                         f" --payload {self.payload_kg:g}" if self.payload_kg is not None else "",
                         f" --accel-offset {self.accel_offset_mps2:g}" if self.accel_offset_mps2 is not None else "",
                         f" --cruise-lift {self.cruise_lift_s:g}" if self.cruise_lift_s is not None else "",
-                        f" --tyre-model {self.tyre_model}" if self.tyre_model is not None else ""])
+                        f" --tyre-model {self.tyre_model}" if self.tyre_model is not None else "",
+                        " --rear-select-low" if self.rear_select_low else ""])
 
     def describe(self) -> str:
         """These settings for a report's title (", clean sensors, on a grade of 0.04", or "")."""
@@ -384,7 +389,8 @@ class Stress:
                         if self.accel_offset_mps2 is not None else "",
                         f", driven until {self.cruise_lift_s:g} s before the brakes"
                         if self.cruise_lift_s is not None else "",
-                        f", every tyre a {self.tyre_model} curve" if self.tyre_model is not None else ""])
+                        f", every tyre a {self.tyre_model} curve" if self.tyre_model is not None else "",
+                        ", the rear axle's ABS select-low" if self.rear_select_low else ""])
 
 
 def draw_stop(seed: int, family: str | None = None, stress: Stress | None = None, **settings: Any) -> StopSpec:

@@ -40,8 +40,9 @@ SLIP_GRID = np.linspace(0.0, 1.0, 1001)
 @dataclass(frozen=True, slots=True)
 class TyreCurve:
     """One tyre on one surface: `kind` is "burckhardt", "magic-formula" or "tmeasy"; `params` its
-    coefficients, (c1, c2, c3), (B, C, D, E) or (dF0, s_M, F_M, s_S, F_S) (`tmeasy_base`); `speed_slope` k of m(v) = 1 + k (v − 15)/15;
-    `label` names the surface it was drawn around (for the tables)."""
+    coefficients, (c1, c2, c3), (B, C, D, E) or (dF0, s_M, F_M, s_S, F_S) (`tmeasy_base`);
+    `speed_slope` k of m(v) = 1 + k (v − 15)/15; `label` names the surface it was drawn around (for
+    the tables)."""
 
     kind: str
     params: tuple[float, ...]

@@ -1872,30 +1872,35 @@ out:
 
 /* estimator._top_elasticity: one wheel's least-squares slope of μ on slip over its samples of
  * [search_left(times, since), end) whose slip lies between their median and 95 % quantile, as
- * (dμ/dλ)·mean λ / mean μ, with that number's standard error from the fit's residuals; None
- * with fewer than min_n samples or min_upper of them in that band. */
+ * (dμ/dλ)·mean λ / mean μ, with that number's standard error from the fit's residuals, and the
+ * smear: the rms of those samples' slip sweeps within the derivative filter (`spread`, 4 rows of
+ * cap: the window ends' slips and weights) over the standard deviation of their slips (∞ for
+ * a sweep over slips that do not spread at all); None with fewer than min_n samples or
+ * min_upper of them in that band. */
 static PyObject *py_top_elasticity(PyObject *self, PyObject *args)
 {
     (void)self;
-    PyObject *o_slip, *o_mu, *o_wheel, *o_times;
+    PyObject *o_slip, *o_mu, *o_wheel, *o_times, *o_spread;
     Py_ssize_t start, end, min_n, min_upper;
     double since;
     int wheel_i;
-    if (!PyArg_ParseTuple(args, "OOOOnndinn:top_elasticity", &o_slip, &o_mu, &o_wheel, &o_times, &start, &end,
-                          &since, &wheel_i, &min_n, &min_upper))
+    if (!PyArg_ParseTuple(args, "OOOOOnndinn:top_elasticity", &o_slip, &o_mu, &o_wheel, &o_times, &o_spread, &start,
+                          &end, &since, &wheel_i, &min_n, &min_upper))
         return NULL;
-    Buf b[4];
+    Buf b[5];
     memset(b, 0, sizeof b);
     PyObject *result = NULL;
     double *sorted = NULL;
     const Py_ssize_t cap = get_slip_mu_wheel(o_slip, o_mu, o_wheel, b);
-    if (cap < 0 || get_array(o_times, &b[3], "times", cap, 0, 0) < 0)
+    if (cap < 0 || get_array(o_times, &b[3], "times", cap, 0, 0) < 0
+        || get_array(o_spread, &b[4], "spread", 4 * cap, 0, 0) < 0)
         goto out;
     if (start < 0 || end < start || end > cap) {
         PyErr_SetString(PyExc_ValueError, "top_elasticity: start, end outside the window");
         goto out;
     }
-    const double *slip = b[0].view.buf, *mu = b[1].view.buf, *times = b[3].view.buf;
+    const double *slip = b[0].view.buf, *mu = b[1].view.buf, *times = b[3].view.buf, *spread = b[4].view.buf;
+    const double *s_lo = spread, *s_hi = spread + cap, *a_lo = spread + 2 * cap, *a_hi = spread + 3 * cap;
     const Py_ssize_t *wheel = b[2].view.buf;
     const Py_ssize_t lo = search_left(times, start, end, since);
     sorted = PyMem_Malloc(sizeof(double) * (size_t)(end - lo + 1));
@@ -1935,18 +1940,21 @@ static PyObject *py_top_elasticity(PyObject *self, PyObject *args)
         }
     const double sxx_ = sxx > 1e-12 ? sxx : 1e-12;
     const double slope = sxy / sxx_;
-    double rss = 0.0;
+    double rss = 0.0, sweep = 0.0;
     for (Py_ssize_t j = lo; j < end; j++)
         if (wheel[j] == wheel_i && slip[j] >= median && slip[j] <= top) {
             const double r = (mu[j] - u_mean) - slope * (slip[j] - l_mean);
             rss += r * r;
+            const double d_lo = s_lo[j] - slip[j], d_hi = s_hi[j] - slip[j];
+            sweep += a_lo[j] * d_lo * d_lo + a_hi[j] * d_hi * d_hi;
         }
     const double scale = l_mean / (u_mean > 1e-6 ? u_mean : 1e-6);
     const double slope_se = sqrt(rss / (double)(m > 2 ? m - 2 : 1) / sxx_);
-    result = Py_BuildValue("(dd)", slope * scale, slope_se * scale);
+    const double smear = sxx > 0.0 ? sqrt(sweep / sxx) : (sweep > 0.0 ? INFINITY : 0.0);
+    result = Py_BuildValue("(ddd)", slope * scale, slope_se * scale, smear);
 out:
     PyMem_Free(sorted);
-    release_all(b, 4);
+    release_all(b, 5);
     return result;
 }
 
@@ -2032,8 +2040,10 @@ static PyMethodDef methods[] = {
      "drift_reference(history, since, span) -> float | None: the median mu_max of the (time, mu_max) pairs\n"
      "from the first at or after since to span after it; None when one of them is NaN"},
     {"top_elasticity", py_top_elasticity, METH_VARARGS,
-     "top_elasticity(slip, mu, wheel, times, start, end, since, wheel_i, min_n, min_upper) -> (float, float) | None\n\n"
-     "estimator._top_elasticity: one wheel's local elasticity over the top half of its recent slips, and its standard error."},
+     "top_elasticity(slip, mu, wheel, times, spread, start, end, since, wheel_i, min_n, min_upper)"
+     " -> (float, float, float) | None\n\n"
+     "estimator._top_elasticity: one wheel's local elasticity over the top half of its recent slips, its standard error\n"
+     "and the smear of those slips by the derivative filter's sweeps."},
     {"spread_loss", py_spread_loss, METH_VARARGS,
      "spread_loss(slip, speed, mu, wheel, spread, lo, hi, thetas, params) -> float\n\n"
      "estimator._spread_loss_numpy: the mean share of the fitted mu the filter's spread of slips loses,\n"

@@ -72,29 +72,33 @@ def _wheel_stats_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, time
                     float(lam @ lam), float(lam @ lam2), float(lam2 @ lam2), float(lam @ m), float(lam2 @ m)))
     return tuple(out)
 
-def _top_elasticity_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, start: int,
-                          end: int, since: float, wheel_i: int, min_n: int, min_upper: int) -> tuple[float, float] | None:
+def _top_elasticity_numpy(slip: np.ndarray, mu: np.ndarray, wheel: np.ndarray, times: np.ndarray, spread: np.ndarray,
+                          start: int, end: int, since: float, wheel_i: int, min_n: int,
+                          min_upper: int) -> tuple[float, float, float] | None:
     """`LugreTrustRegionEstimator._top_elasticity` on the window's columns (the compiled
-    `top_elasticity`'s reference): the elasticity and its standard error."""
+    `top_elasticity`'s reference): the elasticity, its standard error and the smear."""
     lo = int(times[start:end].searchsorted(since)) + start
-    mine = wheel[lo:end] == wheel_i
-    slips = slip[lo:end][mine]
+    rows = np.flatnonzero(wheel[lo:end] == wheel_i) + lo
+    slips = slip[rows]
     if len(slips) < min_n or len(slips) < 1:
         return None
-    mus = mu[lo:end][mine]
     median, top = np.quantile(slips, (0.5, 0.95))
     upper = (slips >= median) & (slips <= top)
     if int(upper.sum()) < min_upper or not top - median >= 1e-4:
         return None
-    ls, us = slips[upper], mus[upper]
+    rows = rows[upper]
+    ls, us = slip[rows], mu[rows]
     l_mean, u_mean = float(ls.mean()), float(us.mean())
     dl = ls - l_mean
-    sxx = max(float(dl @ dl), 1e-12)
+    sxx_raw = float(dl @ dl)
+    sxx = max(sxx_raw, 1e-12)
     slope = float(dl @ (us - u_mean)) / sxx
     residuals = (us - u_mean) - slope * dl
     slope_se = math.sqrt(float(residuals @ residuals) / max(len(ls) - 2, 1) / sxx)
     scale = l_mean / max(u_mean, 1e-6)
-    return slope * scale, slope_se * scale
+    sweep = float(np.sum(spread[2, rows] * (spread[0, rows] - ls) ** 2 + spread[3, rows] * (spread[1, rows] - ls) ** 2))
+    smear = math.sqrt(sweep / sxx_raw) if sxx_raw > 0.0 else (math.inf if sweep > 0.0 else 0.0)
+    return slope * scale, slope_se * scale, smear
 
 class PeakEvidence(RunawayEvidence):
     """The excitation: per wheel a verdict on whether its newest data show the peak, and the
@@ -108,7 +112,7 @@ class PeakEvidence(RunawayEvidence):
         self._shape_proximity = [0.0] * N_WHEELS
         self._shape_verdict_s = [-math.inf] * N_WHEELS
         self._tops_fit = -1               # (`_wheel_tops` of the window this fit saw)
-        self._tops: list[tuple[float, float] | None] = [None] * N_WHEELS
+        self._tops: list[tuple[float, float, float] | None] = [None] * N_WHEELS
 
     def _slip_range(self, weights: np.ndarray | None) -> tuple[list[float], list[float]]:
         """The low (10 %, ≥ 0) and high (90 %) ends of each wheel's recent slips; a wheel
@@ -287,7 +291,7 @@ class PeakEvidence(RunawayEvidence):
         top = self._wheel_tops()[wheel]
         if top is None:
             return "too few samples at the top slips", 0.0, True
-        elasticity, elasticity_se = top
+        elasticity, _elasticity_se, _smear = top
         if elasticity > o.flat_elasticity:
             if elasticity > o.contradiction_elasticity and lam_hi > o.contradiction_slip_ratio * lam_star:
                 # μ still rising clearly (twice the flat threshold) at slips well past where the
@@ -332,7 +336,7 @@ class PeakEvidence(RunawayEvidence):
             return "no peak", 0.0, True   # no peak short of lock, and the data far below the fitted maximum
         return ("proximity {:.2f}", proximity), proximity, True
 
-    def _wheel_tops(self) -> list[tuple[float, float] | None]:
+    def _wheel_tops(self) -> list[tuple[float, float, float] | None]:
         """Each wheel's `_top_elasticity` over the window of this fit, computed once for the
         wheels' own verdicts and the road's bound (`_road_top_bound`)."""
         if self._tops_fit != self._fits:
@@ -353,15 +357,17 @@ class PeakEvidence(RunawayEvidence):
         tops = [t for t in self._wheel_tops() if t is not None]
         if not tops:
             return math.inf
-        weights = [1.0 / max(se, 1e-9) ** 2 for _, se in tops]
+        weights = [1.0 / max(se, 1e-9) ** 2 for _, se, _ in tops]
         total = sum(weights)
-        return sum(w * e for w, (e, _) in zip(weights, tops)) / total + 1.0 / math.sqrt(total)
+        return sum(w * e for w, (e, _, _) in zip(weights, tops)) / total + 1.0 / math.sqrt(total)
 
-    def _top_elasticity(self, wheel: int) -> tuple[float, float] | None:
+    def _top_elasticity(self, wheel: int) -> tuple[float, float, float] | None:
         """The wheel's local elasticity (dμ/dλ)·λ̄/μ̄ over the top half of its slips of the newest
         `flat_window_s`: a least-squares slope over the samples between the median slip and the
         95 % quantile (the single highest are noise and runaway), with its standard error from
-        the residuals; None without enough of them.
+        the residuals, and the smear of those slips: the rms of the sweeps the derivative filter
+        averaged each sample's μ over (`PhysicalSample.slip_spread`) against their standard
+        deviation; None without enough of them.
 
         1 on a linear flank, ≈ 0 at the peak, < 0 past it. At 90 % of the peak the tangent is
         about a third of the secant: median 0.36 over Magic Formula shapes (B 4–14, C 1.2–2.5,
@@ -369,7 +375,7 @@ class PeakEvidence(RunawayEvidence):
         """
         o = self.options
         w = self._window
-        args = (w.slip, w.mu, w.wheel, w.time, w.start, w.end, self._last_sample_s - o.flat_window_s, wheel,
+        args = (w.slip, w.mu, w.wheel, w.time, w.spread, w.start, w.end, self._last_sample_s - o.flat_window_s, wheel,
                 o.flat_min_samples, max(4, o.flat_min_samples // 2))
         if self.core is not None:
             return self.core.top_elasticity(*args)

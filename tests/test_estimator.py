@@ -717,7 +717,7 @@ def test_a_held_slip_carries_its_wheel_last_verdict_only_while_that_verdict_samp
 ])
 def test_mu_rising_well_past_the_fitted_peak_contradicts_the_fit(elasticity, fitted_peak_slip, contradicted):
     est = LugreTrustRegionEstimator()
-    est._top_elasticity = lambda wheel: (elasticity, 0.0)
+    est._top_elasticity = lambda wheel: (elasticity, 0.0, 0.0)
     est._bending = lambda *a: None     # (the data bend over: the verdict reaches the top-of-slips test)
     stats = (50.0, 0.05, 0.2, 0.05, 0.2, 0.5, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0)
     why, proximity, _fresh = est._wheel_verdict(0, stats, 0.55, fitted_peak_slip, 0.5, False, 20.0, False, True)
@@ -726,11 +726,11 @@ def test_mu_rising_well_past_the_fitted_peak_contradicts_the_fit(elasticity, fit
 
 
 @pytest.mark.parametrize("tops, flat", [
-    ([(0.20, 0.05)] * 4, True),                   # every wheel's top slope well under the threshold
-    ([(0.30, 0.20), None, None, None], True),     # near it, but clear of a curve at 80 % of its peak (0.54)
-    ([(0.30, 0.30), None, None, None], False),    # as near, and within its noise of such a curve
-    ([(0.30, 0.30)] + [(0.25, 0.10)] * 3, True),  # ... which the other wheels' slopes on the same road resolve
-    ([(-1.2, 2.0), None, None, None], False),     # "past the peak" by a slope that is all noise
+    ([(0.20, 0.05, 0.0)] * 4, True),                        # every wheel's top slope well under the threshold
+    ([(0.30, 0.20, 0.0), None, None, None], True),          # near it, but clear of a curve at 80 % of its peak
+    ([(0.30, 0.30, 0.0), None, None, None], False),         # as near, and within its noise of such a curve
+    ([(0.30, 0.30, 0.0)] + [(0.25, 0.10, 0.0)] * 3, True),  # ... which the other wheels' slopes resolve
+    ([(-1.2, 2.0, 0.0), None, None, None], False),          # "past the peak" by a slope that is all noise
 ])
 def test_a_flat_top_must_be_clear_of_a_rising_curve_beyond_its_noise(tops, flat):
     # Dev stop 20941: a slip controller held λ ≈ 0.1 on a dry Magic Formula tyre at 82 % of
@@ -1017,3 +1017,4 @@ def test_below_the_evidence_speed_only_a_wheel_that_showed_its_peak_above_it_sho
     assert verdict(1) == "too slow to show a peak"
     assert verdict(0) != "too slow to show a peak"
     assert verdict(0, peak_seen=False) == "too slow to show a peak"
+

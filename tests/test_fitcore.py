@@ -664,6 +664,19 @@ def test_excess_over_fit_compiled_equals_numpy():
         core.excess_over_fit(scratch, slip, wheel, 10, 600, wheel_mu, fitted_mu, wheel_lam, _MISFIT_EDGES, 5)
 
 
+def _random_spread(rng, slip: np.ndarray) -> np.ndarray:
+    """A window's `spread` rows for `slip`: each sample's window-end slips around its own (some
+    samples without any, weights 0), and the ends' weights."""
+    cap = len(slip)
+    spread = np.zeros((4, cap))
+    has = rng.random(cap) < 0.8
+    spread[0] = np.where(has, slip - rng.random(cap) * 0.05, 0.0)
+    spread[1] = np.where(has, slip + rng.random(cap) * 0.05, 0.0)
+    spread[2] = np.where(has, rng.uniform(0.1, 0.4, cap), 0.0)
+    spread[3] = np.where(has, rng.uniform(0.1, 0.4, cap), 0.0)
+    return spread
+
+
 def test_top_elasticity_compiled_equals_numpy():
     # Random windows: some wheels with too few samples, slips with ties (a quantile on a tie),
     # since before, inside and after the window.
@@ -675,8 +688,8 @@ def test_top_elasticity_compiled_equals_numpy():
         start, n, slip, mu, wheel = _random_window(rng, 256, 160, 2 if trial % 2 else 6)
         times = np.full(256, np.nan)
         times[start:start + n] = np.sort(rng.random(n))
-        args = (slip, mu, wheel, times, start, start + n, float(rng.uniform(-0.2, 1.1)), int(rng.integers(0, 4)),
-                int(rng.integers(1, 16)), int(rng.integers(1, 8)))
+        args = (slip, mu, wheel, times, _random_spread(rng, slip), start, start + n, float(rng.uniform(-0.2, 1.1)),
+                int(rng.integers(0, 4)), int(rng.integers(1, 16)), int(rng.integers(1, 8)))
         got, want = core.top_elasticity(*args), _top_elasticity_numpy(*args)
         assert (got is None) == (want is None), (trial, got, want)
         if want is not None:
@@ -696,8 +709,8 @@ def test_top_elasticity_standard_error_is_the_slopes():
         n = 200
         slip = 0.1 + spread * rng.random(n)
         mu = 0.5 + 1.0 * (slip - 0.1) + noise * rng.standard_normal(n)
-        args = (slip, mu, np.zeros(n, dtype=np.intp), np.linspace(0.0, 1.0, n), 0, n, -1.0, 0, 8, 4)
-        (el, se), (el_c, se_c) = _top_elasticity_numpy(*args), core.top_elasticity(*args)
+        args = (slip, mu, np.zeros(n, dtype=np.intp), np.linspace(0.0, 1.0, n), np.zeros((4, n)), 0, n, -1.0, 0, 8, 4)
+        (el, se, smear), (el_c, se_c, smear_c) = _top_elasticity_numpy(*args), core.top_elasticity(*args)
         upper = (slip >= np.quantile(slip, 0.5)) & (slip <= np.quantile(slip, 0.95))
         fit, cov = np.polyfit(slip[upper], mu[upper], 1, cov="unscaled")
         scale = slip[upper].mean() / mu[upper].mean()
@@ -705,9 +718,28 @@ def test_top_elasticity_standard_error_is_the_slopes():
         assert el == pytest.approx(fit[0] * scale, rel=1e-9)
         assert se == pytest.approx(np.sqrt(resid @ resid / (upper.sum() - 2) * cov[0, 0]) * scale, rel=1e-6, abs=1e-12)
         assert (el_c, se_c) == pytest.approx((el, se), rel=1e-9, abs=1e-12)
+        assert smear == smear_c == 0.0    # (no sweep known: no smear)
         errors[spread, noise] = se
     assert errors[0.002, 0.01] > 5 * errors[0.02, 0.01] > 0
     assert errors[0.02, 0.0] < 1e-9
+
+
+@pytest.mark.parametrize("sweep", [0.001, 0.004, 0.02])
+def test_top_elasticity_smear_is_the_filter_sweep_over_the_top_slips_spread(sweep):
+    # Every sample's μ averaged over slips ± `sweep` around its own, with weights ¼ at each end:
+    # the rms sweep is sweep·√½, against the top slips' own standard deviation.
+    from frictiond.peak_evidence import _top_elasticity_numpy
+
+    rng = np.random.default_rng(5)
+    n = 120
+    slip = 0.08 + 0.02 * rng.random(n)
+    mu = 0.6 + 0.5 * (slip - 0.08)
+    spread = np.vstack((slip - sweep, slip + sweep, np.full(n, 0.25), np.full(n, 0.25)))
+    args = (slip, mu, np.zeros(n, dtype=np.intp), np.linspace(0.0, 1.0, n), spread, 0, n, -1.0, 0, 8, 4)
+    upper = (slip >= np.quantile(slip, 0.5)) & (slip <= np.quantile(slip, 0.95))
+    want = sweep * math.sqrt(0.5) / slip[upper].std()
+    assert _top_elasticity_numpy(*args)[2] == pytest.approx(want, rel=1e-9)
+    assert core.top_elasticity(*args)[2] == pytest.approx(want, rel=1e-9)
 
 
 def test_spread_loss_compiled_equals_numpy():

@@ -133,6 +133,12 @@ class LugreTROptions:
     rising_elasticity: float = 0.54       # ... and the wheels' pooled slope one standard error up short of this (80 % of a peak)
     flat_window_s: float = 0.5            # ... over the wheel's samples of the newest this long (a few ABS cycles)
     flat_min_samples: int = 8             # ... at least this many of them, half in the top half of the slips
+    # ... whose slips spread at least half as wide (σ) as the derivative filter swept a sample's
+    # slip (rms): μ is a mean over that sweep, and errors in the regressor shrink a slope towards
+    # zero. Against the truth's slope over the same samples (dev 0–599, 40,566 evaluations), a
+    # curve still rising (true elasticity > 0.5) read flat 8 % of the time with a smear below 1,
+    # 12 % at 1–1.5, 25 % at 1.5–2 and 31–37 % beyond 2.
+    max_top_smear: float = 2.0
     contradiction_elasticity: float = 0.7     # μ still rising at this share of μ/λ ...
     contradiction_slip_ratio: float = 1.2     # ... at slips this far past the fitted peak: the fit is not this tyre
     excitation_every: int = 3             # updates between excitation evaluations
@@ -221,6 +227,8 @@ class LugreTROptions:
             raise ValueError("keep_valid_confidence: must not exceed valid_confidence")
         if self.rising_elasticity < self.flat_elasticity:
             raise ValueError("rising_elasticity: must not be below flat_elasticity")
+        if not self.max_top_smear > 0:
+            raise ValueError("max_top_smear: must be > 0")
         if self.theta_min <= 0:
             raise ValueError("theta_min: must be > 0")
 

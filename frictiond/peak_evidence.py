@@ -291,7 +291,7 @@ class PeakEvidence(RunawayEvidence):
         top = self._wheel_tops()[wheel]
         if top is None:
             return "too few samples at the top slips", 0.0, True
-        elasticity, _elasticity_se, _smear = top
+        elasticity, elasticity_se, smear = top
         if elasticity > o.flat_elasticity:
             if elasticity > o.contradiction_elasticity and lam_hi > o.contradiction_slip_ratio * lam_star:
                 # μ still rising clearly (twice the flat threshold) at slips well past where the
@@ -304,6 +304,15 @@ class PeakEvidence(RunawayEvidence):
             # peak (a wheel-deceleration trigger on a soft tyre, a slip target short of a snow
             # curve's peak) the top slips still show μ rising at 0.4–0.7 of its secant.
             return ("still rising ({:.2f})", elasticity), 0.0, True
+        if smear > o.max_top_smear:
+            # μ is read through the derivative filter as a mean over the slips the wheel swept
+            # within its window. Where those sweeps are wide against the top slips' own spread,
+            # no sample's μ belongs to its slip closely enough to resolve a slope across them:
+            # the error in the regressor shrinks the slope towards zero, and a curve still
+            # rising reads flat (a deceleration ABS cycling a soft cobblestone tyre at 60 % of
+            # its grip, dev stop 245 forced split with a select-low rear axle: 0.3 read where
+            # the same samples' true slips and μ give 0.6–0.7).
+            return ("top slips within the filter's sweep ({:.1f})", smear), 0.0, True
         slope_bound = self._road_top_bound()
         if slope_bound > o.rising_elasticity:
             # A flat-looking slope whose road's (the wheels' pooled) is within one standard

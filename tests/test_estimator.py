@@ -1018,3 +1018,41 @@ def test_below_the_evidence_speed_only_a_wheel_that_showed_its_peak_above_it_sho
     assert verdict(0) != "too slow to show a peak"
     assert verdict(0, peak_seen=False) == "too slow to show a peak"
 
+
+@pytest.mark.parametrize("smear, shown", [(1.0, True), (1.9, True), (2.5, False), (math.inf, False)])
+def test_a_flat_top_within_the_filter_sweep_of_its_slips_shows_no_peak(smear, shown):
+    # μ is a mean over the slips the wheel swept within the derivative filter's window: where
+    # those sweeps are wide against the top slips' own spread, the slope across them is shrunk
+    # towards zero, and a flat reading says nothing of the tyre.
+    est = LugreTrustRegionEstimator()
+    est._top_elasticity = lambda wheel: (0.2, 0.05, smear)
+    est._bending = lambda *a: None
+    stats = (50.0, 0.05, 0.2, 0.05, 0.2, 0.5, -math.inf, 0.0, 0.0, 0.0, 0.0, 0.0)
+    why, proximity, _fresh = est._wheel_verdict(0, stats, 0.52, 0.2, 0.52, False, 20.0, False, True)
+    assert (proximity >= est.options.excitation_slip_ratio) == shown
+    assert why[0].startswith("top slips within the filter's sweep") == (not shown)
+
+
+def test_a_soft_tyre_cycled_fast_below_its_peak_is_not_taken_for_a_flat_top():
+    # Dev stop 245 with every stop split and the rear axle select-low: a deceleration ABS cycles
+    # the dry-cobblestone front wheel (peak at slip 0.38) at slips 0.07–0.10, 60 % of its grip.
+    # Each sample's μ is a mean over ±0.008 of slip, the top slips spread ±0.003: their slope
+    # read 0.3 where the same samples' true slips and μ give 0.6–0.7, the wheel "showed" its
+    # peak, and the four wheels' mean went VALID 21 % low.
+    from dataclasses import replace
+
+    from frictiond.campaign.draw import Stress, draw_stop
+    from frictiond.campaign.score import estimator_scores
+    from frictiond.campaign.simulate import simulate_stop
+    from frictiond.replay import estimates_of
+
+    stop = simulate_stop(draw_stop(245, "*/*/split", Stress(rear_select_low=True)))
+    config = stop.config("lugre-tr")
+    false_valid = {}
+    for max_smear in (LugreTROptions().max_top_smear, 1e9):
+        options = replace(config.estimator.lugre_tr, max_top_smear=max_smear)
+        _pipeline, estimates = estimates_of(replace(config, estimator=replace(config.estimator, lugre_tr=options)),
+                                            stop.frames)
+        false_valid[max_smear] = estimator_scores(estimates, stop.truth)["false_valid"]
+    assert false_valid[1e9] > 10
+    assert false_valid[LugreTROptions().max_top_smear] == 0

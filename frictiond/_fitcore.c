@@ -2042,8 +2042,8 @@ static PyMethodDef methods[] = {
     {"top_elasticity", py_top_elasticity, METH_VARARGS,
      "top_elasticity(slip, mu, wheel, times, spread, start, end, since, wheel_i, min_n, min_upper)"
      " -> (float, float, float) | None\n\n"
-     "estimator._top_elasticity: one wheel's local elasticity over the top half of its recent slips, its standard error\n"
-     "and the smear of those slips by the derivative filter's sweeps."},
+     "estimator._top_elasticity: one wheel's local elasticity over the top half of its recent slips, its\n"
+     "standard error and the smear of those slips by the derivative filter's sweeps."},
     {"spread_loss", py_spread_loss, METH_VARARGS,
      "spread_loss(slip, speed, mu, wheel, spread, lo, hi, thetas, params) -> float\n\n"
      "estimator._spread_loss_numpy: the mean share of the fitted mu the filter's spread of slips loses,\n"

@@ -50,12 +50,18 @@ def campaign_stop_estimates(seed, relaxation_compensation=True, family=None, **l
     spec = draw_stop(seed, family)
     stop = simulate_stop(replace(spec, wind_mps=0.0, grade=0.0, sensors=replace(spec.sensors, wheel_messages="one",
                                                                                 cycle_times_in_dbc=True)))
-    config = stop.config("lugre-tr")
+    config = with_lugre_options(stop.config("lugre-tr"), **lugre_options)
     config = replace(config, frontend=replace(config.frontend, relaxation_compensation=relaxation_compensation,
-                                              level_road=True),
-                     estimator=replace(config.estimator, lugre_tr=replace(config.estimator.lugre_tr, **lugre_options)))
+                                              level_road=True))
     _pipeline, estimates = estimates_of(config, stop.frames)
     return stop, estimates
+
+
+def with_lugre_options(config, **lugre_options):
+    """`config` with `lugre_options` replacing its `LugreTROptions` fields."""
+    estimator = config.estimator
+    return dataclasses.replace(config, estimator=dataclasses.replace(
+        estimator, lugre_tr=dataclasses.replace(estimator.lugre_tr, **lugre_options)))
 
 
 def lugre_curve(p):
@@ -1039,20 +1045,16 @@ def test_a_soft_tyre_cycled_fast_below_its_peak_is_not_taken_for_a_flat_top():
     # Each sample's μ is a mean over ±0.008 of slip, the top slips spread ±0.003: their slope
     # read 0.3 where the same samples' true slips and μ give 0.6–0.7, the wheel "showed" its
     # peak, and the four wheels' mean went VALID 21 % low.
-    from dataclasses import replace
-
     from frictiond.campaign.draw import Stress, draw_stop
     from frictiond.campaign.score import estimator_scores
     from frictiond.campaign.simulate import simulate_stop
     from frictiond.replay import estimates_of
 
     stop = simulate_stop(draw_stop(245, "*/*/split", Stress(rear_select_low=True)))
-    config = stop.config("lugre-tr")
     false_valid = {}
     for max_smear in (LugreTROptions().max_top_smear, 1e9):
-        options = replace(config.estimator.lugre_tr, max_top_smear=max_smear)
-        _pipeline, estimates = estimates_of(replace(config, estimator=replace(config.estimator, lugre_tr=options)),
-                                            stop.frames)
+        config = with_lugre_options(stop.config("lugre-tr"), max_top_smear=max_smear)
+        _pipeline, estimates = estimates_of(config, stop.frames)
         false_valid[max_smear] = estimator_scores(estimates, stop.truth)["false_valid"]
     assert false_valid[1e9] > 10
     assert false_valid[LugreTROptions().max_top_smear] == 0

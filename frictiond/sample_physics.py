@@ -242,6 +242,9 @@ class SamplePhysics:
             return
         veh = self.vehicle
         v = sample.speed_mps
+        sample.wheel_torques_unknown = self.wheel_torques_unknown
+        sample.body_force_mu = (-(accel - self._sensor_offset_mps2) - veh.resistance_force(v) / veh.mass) / GRAVITY_MPS2
+        sample.body_force_doubt = (veh.resistance_doubt_n(v) / veh.mass + self._sensor_offset_doubt_mps2) / GRAVITY_MPS2
         # (the most resistance the car may meet: what it leaves is grip the tyres surely used)
         resistance = (veh.resistance_force(v) + veh.resistance_doubt_n(v)) / veh.mass
         body = (-(accel - self._sensor_offset_mps2) - resistance - self._sensor_offset_doubt_mps2) / GRAVITY_MPS2

@@ -47,6 +47,13 @@ class PhysicalSample:
     speed_from_reference: bool = False
     abs_active: tuple[bool, bool, bool, bool] = (False, False, False, False)   # an ABS works the wheel
     body_mu: float = float("nan")  # the car's total tyre force / weight, from its accelerometer
+    # The same from the accelerometer alone, its best estimate rather than a bound (the learnt
+    # offset and the configured drag taken off), and the half-width the offset's and the drag's
+    # doubt leave it (over g): the one measure of the tyres' force where no wheel's brake torque
+    # is known (`wheel_torques_unknown`: one master-cylinder pressure, an ABS releasing wheels).
+    body_force_mu: float = float("nan")
+    body_force_doubt: float = 0.0
+    wheel_torques_unknown: bool = False
     # The car's lateral acceleration over g, less what the accelerometer's offset may read: the
     # lateral force per unit load its tyres carry, which a turn takes from their grip.
     lateral_mu: float = 0.0

@@ -1,0 +1,201 @@
+"""μ_max from the car's total tyre force, for a car whose wheels' brake torques are unknown.
+
+A car that sends one master-cylinder pressure for all wheels: once its ABS releases a wheel, no
+wheel's brake torque is known, and so no wheel's μ. The accelerometer still measures the sum,
+Σ N_i μ(λ_i, v) / Σ N_i, with the four slips and loads known. One θ of the static LuGre curve,
+its shape held at the priors, shared by the four wheels and fitted to that sum over the last
+`window_s`, gives a μ_max.
+
+A sum constrains the curve only over the slips the wheels swept. It shows the peak where a
+wheel on each side of the car spent `span_share` of the window below 0.8 and past 1.2 times the
+fitted peak slip: their μ passed over the peak, and the sum's top is the curve's (on split μ a
+side whose wheels never crossed it would lend the sum an unshown peak). A slip controller holding
+its wheels short of the peak, or a gentle stop, sweeps no such span. Rows with a wheel far past
+the peak are left out, and a window made mostly of them shows nothing (`BodySumFit._fit`).
+Residuals above `max_rms_share` of μ_max mean one θ does not describe the four wheels (a change
+of road, two roads); in a turn (`max_lateral_mu`) the tyres' lateral force takes grip the sum
+does not see.
+Pure numerics: nothing of CAN or of the front end.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from .samples import LEFT_WHEELS, RIGHT_WHEELS
+from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian, peak
+
+# Slips (as multiples of the fitted peak slip) a wheel must have spent time below and past.
+SPAN_BELOW = 0.8
+SPAN_PAST = 1.2
+# Gauss–Newton on ln θ: the steps a fit may take, and the step size that ends it.
+MAX_STEPS = 12
+STEP_TOLERANCE = 1e-4
+MAX_LOG_STEP = 0.7
+
+
+@dataclass(frozen=True)
+class BodySumOptions:
+    window_s: float = 1.0            # the rows fitted: the newest this long (a few ABS cycles)
+    min_rows: int = 20               # ... at least this many, over at least half the window
+    min_speed_mps: float = 5.0       # below this a slip is the speed estimate's error (as the wheels' evidence)
+    fit_every_s: float = 0.05        # one fit per this long (the sum moves with the ABS cycles)
+    measurement_std: float = 0.04    # a row's noise (accelerometer and slips), against the prior's weight
+    max_slip_ratio: float = 2.0      # rows fitted: every wheel within this many times the fitted peak slip ...
+    min_near_share: float = 0.5      # ... at least this share of the window's rows
+    span_share: float = 0.1          # a wheel spans the peak: this share of the rows each side of it
+    max_rms_share: float = 0.06      # one curve fits: the residuals' rms within this share of μ_max ...
+    misfit_block_s: float = 0.05     # ... the rms of their means over this long (the accelerometer's noise averaged)
+    max_lateral_mu: float = 0.05     # going straight: the window's lateral μ at most this
+
+
+@dataclass(frozen=True)
+class BodySumResult:
+    """One fit: μ_max and λ* at the speed given, θ, the residuals' rms over μ_max, which wheels
+    spanned the fitted peak, the window's largest lateral μ, the rows fitted, and why it does not
+    show the peak ("" when it does)."""
+    mu_max: float
+    slip_star: float
+    theta: float
+    rms_share: float
+    spans: tuple[bool, ...]
+    lateral_mu: float
+    rows: int
+    verdict: str
+
+
+class BodySumFit:
+    """The rows of the car's total force and slips, and the shared-θ fit to them."""
+
+    def __init__(self, shape: LugreParams, prior_theta: float, prior_std_log_theta: float,
+                 theta_bounds: tuple[float, float], options: BodySumOptions | None = None) -> None:
+        self.options = options or BodySumOptions()
+        self._shape = shape
+        self._prior_log_theta = math.log(prior_theta)
+        self._prior_std = prior_std_log_theta
+        self._log_bounds = (math.log(theta_bounds[0]), math.log(theta_bounds[1]))
+        self._rows: deque[tuple[float, float, tuple[float, ...], tuple[float, ...], float, float]] = deque()
+        self._log_theta = self._prior_log_theta
+        self._last_fit_s = -math.inf
+        self._last: BodySumResult | None = None
+
+    def clear(self) -> None:
+        """Forget the rows and the last fit (a new stop, a new road)."""
+        self._rows.clear()
+        self._log_theta = self._prior_log_theta
+        self._last_fit_s = -math.inf
+        self._last = None
+
+    def push(self, time_s: float, speed_mps: float, slips: tuple[float, ...], loads: tuple[float, ...],
+             body_mu: float, lateral_mu: float) -> None:
+        """One row: the wheels' slips and normal loads, the body's μ. Rows that cannot be fitted
+        (a speed a slip says nothing at, a NaN, no load) are left out."""
+        total = sum(loads)
+        if not (speed_mps >= self.options.min_speed_mps and math.isfinite(body_mu) and total > 0.0
+                and all(math.isfinite(s) for s in slips) and min(loads) >= 0.0):
+            return
+        shares = tuple(f / total for f in loads)
+        clipped = tuple(min(max(s, 0.0), MAX_MODEL_SLIP) for s in slips)
+        lateral = lateral_mu if math.isfinite(lateral_mu) else math.inf
+        self._rows.append((time_s, speed_mps, clipped, shares, body_mu, lateral))
+
+    def result(self, now_s: float, speed_mps: float) -> BodySumResult | None:
+        """The fit over the newest `window_s` of rows, refitted every `fit_every_s`; None without
+        enough rows."""
+        o = self.options
+        rows = self._rows
+        while rows and rows[0][0] < now_s - o.window_s:
+            rows.popleft()
+        if len(rows) < o.min_rows or rows[-1][0] - rows[0][0] < 0.5 * o.window_s:
+            return None
+        if self._last is not None and now_s - self._last_fit_s < o.fit_every_s:
+            return self._last
+        self._last_fit_s = now_s
+        self._last = self._fit(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                               np.array([r[2] for r in rows]), np.array([r[3] for r in rows]),
+                               np.array([r[4] for r in rows]), max(r[5] for r in rows), max(speed_mps, o.min_speed_mps))
+        return self._last
+
+    def _fit(self, times: np.ndarray, speed: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray,
+             lateral_mu: float, speed_now: float) -> BodySumResult:
+        """θ fitted to every row, then again to the rows whose wheels all stay within
+        `max_slip_ratio` of the fitted peak slip; the peak and the evidence from those.
+
+        A wheel far past its peak gives its tyre's sliding level: from 5 % (a Burckhardt dry
+        tyre) to 55 % (a Magic Formula tyre with C = 2.5) below the peak. The curve, its shape at
+        the priors, falls about 12 % there: rows with such a wheel would pull the fitted peak
+        towards the sliding level. Near the peak every tyre's curve is round, as the model's."""
+        o = self.options
+        x = self._solve(self._log_theta, speed, slips, shares, body)
+        params = dataclasses.replace(self._shape, theta=math.exp(x))
+        _, slip_star = peak(speed_now, params)
+        near = slips.max(axis=1) <= o.max_slip_ratio * slip_star
+        rows = int(near.sum())
+        enough = rows >= max(o.min_rows, o.min_near_share * len(body))
+        if enough:
+            times, speed, slips, shares, body = times[near], speed[near], slips[near], shares[near], body[near]
+            x = self._solve(x, speed, slips, shares, body)
+        self._log_theta = x
+        model, _ = self._sum_and_slope(slips, speed[:, None], shares, x)
+        params = dataclasses.replace(self._shape, theta=math.exp(x))
+        mu_max, slip_star = peak(speed_now, params)
+        period = float(np.median(np.diff(times))) if len(times) > 1 else o.misfit_block_s
+        rms_share = _block_rms(model - body, o.misfit_block_s / max(period, 1e-6)) / max(mu_max, 1e-6)
+        below = (slips <= SPAN_BELOW * slip_star).mean(axis=0)
+        past = (slips >= SPAN_PAST * slip_star).mean(axis=0)
+        spans = (below >= o.span_share) & (past >= o.span_share)
+        verdict = ""
+        if not enough:
+            verdict = "wheels deep past the peak"
+        elif not (spans[LEFT_WHEELS,].any() and spans[RIGHT_WHEELS,].any()):
+            verdict = "wheels' slips not across the fitted peak on both sides"
+        elif rms_share > o.max_rms_share:
+            verdict = "one curve does not fit the four wheels"
+        elif lateral_mu > o.max_lateral_mu:
+            verdict = "turning"
+        return BodySumResult(mu_max, slip_star, math.exp(x), rms_share, tuple(spans.tolist()), lateral_mu, len(body),
+                             verdict)
+
+    def _solve(self, x: float, speed: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray) -> float:
+        """Gauss–Newton on ln θ from `x`: the prior a weak pull, the bounds a clamp."""
+        prior_weight = self.options.measurement_std / self._prior_std
+        v = speed[:, None]
+        for _ in range(MAX_STEPS):
+            model, slope = self._sum_and_slope(slips, v, shares, x)
+            residual = model - body
+            prior_residual = prior_weight * (x - self._prior_log_theta)
+            normal = float(slope @ slope) + prior_weight * prior_weight
+            step = -(float(slope @ residual) + prior_weight * prior_residual) / normal
+            step = max(-MAX_LOG_STEP, min(MAX_LOG_STEP, step))
+            x_new = min(max(x + step, self._log_bounds[0]), self._log_bounds[1])
+            done = abs(x_new - x) < STEP_TOLERANCE
+            x = x_new
+            if done:
+                break
+        return x
+
+    def _sum_and_slope(self, slips: np.ndarray, v: np.ndarray, shares: np.ndarray,
+                       log_theta: float) -> tuple[np.ndarray, np.ndarray]:
+        """The load-weighted sum of the four wheels' μ per row, and its derivative in ln θ."""
+        theta = math.exp(log_theta)
+        params = dataclasses.replace(self._shape, theta=theta)
+        mu, jac = mu_and_jacobian(slips, v, params, ("theta",))
+        return (shares * mu).sum(axis=1), (shares * jac[..., 0]).sum(axis=1) * theta
+
+
+def _block_rms(residuals: np.ndarray, rows_per_block: float) -> float:
+    """The rms of the residuals' means over consecutive blocks of about `rows_per_block` rows.
+
+    A misfit of the curve (two roads under one θ, a change of road) lasts an ABS cycle or more;
+    the accelerometer's noise, ±0.1–0.2 m/s² per sample, does not: on ice it alone is a tenth of
+    μ. The block means keep the first and average the second."""
+    k = max(1, int(round(rows_per_block)))
+    n = len(residuals) - len(residuals) % k
+    if n < k:
+        return float(np.sqrt(np.mean(residuals ** 2)))
+    means = residuals[len(residuals) - n:].reshape(-1, k).mean(axis=1)
+    return float(np.sqrt(np.mean(means ** 2)))

@@ -17,6 +17,7 @@ BELOW_STOP_FLOOR = "μ_max below the grip the car used this stop"
 MISFIT = "the static model misfits this tyre (changes of road too often)"
 UNSHOWN_WHEELS = "μ_max leans on wheels that have not shown their peak"
 FEW_SAMPLES = "too few usable samples"
+BODY_SUM = "no peak shown in the car's total force"
 
 # A wheel verdict that is a number against a threshold reads, short of it, as what it missed.
 _SHORT_OF = {"proximity": "short of the fitted peak"}
@@ -28,6 +29,11 @@ def wheel_verdict_words(why: Any) -> str:
     text = why if isinstance(why, str) else why[0]
     words = text.split("{", 1)[0].strip().rstrip("(").strip()
     return _SHORT_OF.get(words, words)
+
+
+def body_sum_reason(verdict: str) -> str:
+    """`BODY_SUM` with why the fit of the car's total force does not show the peak."""
+    return f"{BODY_SUM} ({verdict})"
 
 
 def not_excited_reason(wheel_whys: Sequence[Any]) -> str:

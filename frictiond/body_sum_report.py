@@ -1,0 +1,86 @@
+"""The estimate from the car's total tyre force, where no wheel's brake torque is known.
+
+`BodySumReport` is a part of `LugreTrustRegionEstimator`: while the front end says no wheel's
+brake torque is known (`PhysicalSample.wheel_torques_unknown`: one master-cylinder pressure, an
+ABS releasing wheels), no wheel's μ enters the window, and μ_max comes from the shared-θ fit of
+the body's force (`body_sum_fit`) instead. Its confidence is the probability of μ_max within
+`confidence_band` under a normal error of σ² = the fit's measured mismatch
+(`body_sum_mismatch`)² + its drift² + the accelerometer's and the drag's doubt²/3.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from . import input_quality, not_valid
+from .body_sum_fit import BodySumFit
+from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
+from .tyre_model import LugreParams
+
+# The body-sum fits μ_max's drift is read over: the largest change within this long.
+DRIFT_WINDOW_S = 0.3
+
+
+class BodySumReport:
+    """Rows of the body's force in, an estimate out (`_body_sum_estimate`)."""
+
+    def _init_body_sum(self) -> None:
+        o = self.options
+        shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
+                            alpha=o.alpha, patch_length=o.patch_length)
+        self._body_sum = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max))
+        self._body_sum_history: deque[tuple[float, float]] = deque()
+
+    def _clear_body_sum(self) -> None:
+        self._body_sum.clear()
+        self._body_sum_history.clear()
+
+    def _take_in_body_sum(self, sample: PhysicalSample) -> None:
+        """The sample's row of the body's force, while that is all there is to fit."""
+        if self.options.body_sum and sample.wheel_torques_unknown and sample.braking:
+            self._body_sum.push(sample.time_s, sample.speed_mps, sample.slip, sample.normal_force_n,
+                                sample.body_force_mu, sample.lateral_mu)
+            self._body_force_doubt = sample.body_force_doubt
+
+    def _body_sum_estimate(self, now_s: float, speed: float) -> FrictionEstimate | None:
+        """The estimate from the body's force; None without a fit (too few rows)."""
+        o = self.options
+        fit = self._body_sum.result(now_s, speed)
+        if fit is None:
+            return None
+        mu_max = max(fit.mu_max, self._body_floor(now_s))   # (no road gives less than the car just used)
+        history = self._body_sum_history
+        history.append((now_s, mu_max))
+        while history and history[0][0] < now_s - DRIFT_WINDOW_S:
+            history.popleft()
+        scale = max(mu_max, 0.05)
+        drift = (max(m for _, m in history) - min(m for _, m in history)) / scale
+        doubt = self._body_force_doubt / scale
+        spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0
+        confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
+        confidence *= input_quality.confidence_factor(self._input_share)
+        detail = {"body_sum": 1.0, "body_sum_rms": fit.rms_share, "body_sum_spanning": float(sum(fit.spans)),
+                  "body_sum_rows": float(fit.rows)}
+        last = self._last_estimate
+        threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
+        if speed < o.peak_evidence_min_speed:
+            return self._hold(now_s, speed)   # (a stop ending: a VALID standing is held, as the wheels' fit's)
+        if fit.verdict:
+            if self._last_valid is not None and now_s - self._last_excited_s <= o.excitation_hold_s:
+                return self._hold(now_s, speed)   # (as the wheels' fit: one ABS cycle without evidence)
+            self._not_valid = not_valid.body_sum_reason(fit.verdict)
+            confidence = 0.0
+        elif mu_max < self._stop_floor():
+            self._not_valid = not_valid.BELOW_STOP_FLOOR
+            confidence = min(confidence, 0.5 * threshold)
+        elif confidence < threshold:
+            self._not_valid = not_valid.LOW_CONFIDENCE
+        else:
+            self._not_valid = ""
+        status = Status.VALID if not self._not_valid else Status.CONVERGING
+        estimate = FrictionEstimate(now_s, status, mu_max, fit.slip_star, fit.theta, confidence,
+                                    (mu_max,) * N_WHEELS, mu_max * math.sqrt(spread2), detail)
+        if status == Status.VALID:
+            self._last_valid = estimate
+            self._last_excited_s = now_s
+        return estimate

@@ -1,0 +1,203 @@
+"""The fit of the car's total tyre force (`body_sum_fit`) and the estimate it gives where no
+wheel's brake torque is known (`body_sum_report`). The truths are Burckhardt curves, not the
+fit's static LuGre."""
+import math
+
+import numpy as np
+import pytest
+
+from frictiond.body_sum_fit import BodySumFit, BodySumOptions
+from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
+from frictiond.samples import PhysicalSample, Status
+from frictiond.tyre_model import LugreParams
+
+DRY = (1.2801, 23.99, 0.52)       # Burckhardt dry asphalt: peak 1.17 at slip 0.17
+SNOW = (0.1946, 94.129, 0.0646)   # snow: peak 0.19 at slip 0.06
+RATE_HZ = 100
+LOADS = (4800.0, 4800.0, 3200.0, 3200.0)
+
+
+def burckhardt(c, slip):
+    slip = np.asarray(slip, dtype=float)
+    return c[0] * (1.0 - np.exp(-c[1] * slip)) - c[2] * slip
+
+
+def burckhardt_peak(c):
+    slip = math.log(c[0] * c[1] / c[2]) / c[1]
+    return float(burckhardt(c, slip)), slip
+
+
+def new_fit(**options):
+    o = LugreTROptions()
+    shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
+                        alpha=o.alpha, patch_length=o.patch_length)
+    return BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max), BodySumOptions(**options))
+
+
+def cycling_slips(t, peak_slip, low=0.3, high=3.0, period=0.3):
+    """An ABS's cycles: each wheel's slip swept from `low` to `high` times the peak slip, the
+    four out of phase. (The fit's curve, its shape at the priors, puts a dry road's peak at about
+    twice a Burckhardt curve's slip: the wheels must pass that to show it.)"""
+    phases = np.array([0.0, 0.25, 0.5, 0.75])
+    swing = 0.5 * (1.0 - np.cos(2.0 * np.pi * (t / period + phases)))
+    return peak_slip * (low + (high - low) * swing)
+
+
+def rows(curves, slips_of, seconds=1.5, noise=0.01, lateral=0.0, seed=3, speed=20.0):
+    """(time, speed, slips, loads, body μ, lateral μ) rows; `curves` per wheel (FL, FR, RL, RR)."""
+    rng = np.random.default_rng(seed)
+    share = np.array(LOADS) / sum(LOADS)
+    out = []
+    for k in range(int(seconds * RATE_HZ)):
+        t = k / RATE_HZ
+        slips = slips_of(t)
+        body = float(sum(s * burckhardt(c, lam) for s, c, lam in zip(share, curves, slips)))
+        out.append((t, speed - 3.0 * t, tuple(slips.tolist()), LOADS, body + noise * rng.standard_normal(), lateral))
+    return out
+
+
+def fitted(fit, data):
+    result = None
+    for row in data:
+        fit.push(*row)
+        result = fit.result(row[0], row[1])
+    return result
+
+
+def test_wheels_swept_over_the_peak_give_it():
+    dry_peak, dry_slip = burckhardt_peak(DRY)
+    snow_peak, snow_slip = burckhardt_peak(SNOW)
+    for curve, peak, slip in ((DRY, dry_peak, dry_slip), (SNOW, snow_peak, snow_slip)):
+        result = fitted(new_fit(), rows([curve] * 4, lambda t, s=slip: cycling_slips(t, s), noise=0.01 * peak))
+        assert result.verdict == ""
+        assert result.mu_max == pytest.approx(peak, rel=0.1)
+        assert all(result.spans)
+
+
+def test_accelerometer_noise_alone_is_not_a_misfit():
+    """On snow the accelerometer's noise (±0.15 m/s²) is 8 % of μ per row; the block means
+    average it, and the fit still shows the peak."""
+    peak, slip = burckhardt_peak(SNOW)
+    result = fitted(new_fit(), rows([SNOW] * 4, lambda t: cycling_slips(t, slip), noise=0.015))
+    assert result.verdict == ""
+    single_rows = fitted(new_fit(misfit_block_s=0.0), rows([SNOW] * 4, lambda t: cycling_slips(t, slip), noise=0.015))
+    assert single_rows.rms_share > result.rms_share * 1.5
+
+
+def test_a_slip_held_short_of_the_peak_shows_nothing():
+    _, slip = burckhardt_peak(DRY)
+    held = fitted(new_fit(), rows([DRY] * 4, lambda t: np.full(4, 0.6 * slip)))
+    assert held.verdict.startswith("wheels' slips not across the fitted peak")
+
+
+def test_split_mu_with_one_side_held_shows_nothing():
+    """Ice-like snow on the left, its wheels cycling over their peak; the dry right held at a
+    small slip: the sum's top is the left side's, and the right's peak is not shown."""
+    _, snow_slip = burckhardt_peak(SNOW)
+
+    def slips(t):
+        s = cycling_slips(t, snow_slip)
+        s[1] = s[3] = 0.02
+        return s
+
+    result = fitted(new_fit(), rows([SNOW, DRY, SNOW, DRY], slips))
+    assert result.verdict != ""
+    assert not (result.spans[1] or result.spans[3])
+
+
+def test_wheels_dwelling_past_the_peak_show_nothing():
+    _, slip = burckhardt_peak(DRY)
+    deep = fitted(new_fit(), rows([DRY] * 4, lambda t: cycling_slips(t, slip, low=0.5, high=6.0)))
+    assert deep.verdict == "wheels deep past the peak"
+
+
+def test_a_change_of_road_in_the_window_is_a_misfit():
+    _, dry_slip = burckhardt_peak(DRY)
+
+    def curve_rows():
+        data = rows([DRY] * 4, lambda t: cycling_slips(t, dry_slip), seconds=1.0)
+        wet = rows([(0.857, 33.822, 0.347)] * 4, lambda t: cycling_slips(t, dry_slip), seconds=1.0)
+        return data[:50] + [(t + 0.5, *rest) for t, *rest in wet[50:]]
+
+    assert fitted(new_fit(), curve_rows()).verdict == "one curve does not fit the four wheels"
+
+
+def test_turning_shows_nothing():
+    _, slip = burckhardt_peak(DRY)
+    assert fitted(new_fit(), rows([DRY] * 4, lambda t: cycling_slips(t, slip), lateral=0.2)).verdict == "turning"
+
+
+def test_too_few_rows_give_no_fit():
+    _, slip = burckhardt_peak(DRY)
+    assert fitted(new_fit(), rows([DRY] * 4, lambda t: cycling_slips(t, slip), seconds=0.3)) is None
+
+
+def test_rows_a_fit_cannot_take_are_left_out():
+    fit = new_fit()
+    for k in range(200):
+        t = k / RATE_HZ
+        fit.push(t, 20.0, (0.1, math.nan, 0.1, 0.1), LOADS, 0.5, 0.0)
+        fit.push(t, 2.0, (0.1, 0.1, 0.1, 0.1), LOADS, 0.5, 0.0)
+        fit.push(t, 20.0, (0.1, 0.1, 0.1, 0.1), LOADS, math.nan, 0.0)
+    assert fit.result(2.0, 20.0) is None
+
+
+def body_samples(curve, slips_of, seconds=2.5, torques_unknown=True, noise=0.01, seed=5):
+    """Samples of a car whose wheels' μ the front end could not measure (`usable` all False)."""
+    out = []
+    for t, speed, slips, loads, body, lateral in rows([curve] * 4, slips_of, seconds=seconds, noise=noise, seed=seed):
+        out.append(PhysicalSample(time_s=t, speed_mps=speed, slip=slips, mu_used=(math.nan,) * 4, normal_force_n=loads,
+                                  tyre_force_n=(0.0,) * 4, usable=(False,) * 4, braking=True, lateral_mu=lateral,
+                                  body_force_mu=body, wheel_torques_unknown=torques_unknown))
+    return out
+
+
+def test_the_estimator_publishes_the_body_sum_where_no_wheel_torque_is_known():
+    peak, slip = burckhardt_peak(DRY)
+    samples = body_samples(DRY, lambda t: cycling_slips(t, slip))
+    estimator = LugreTrustRegionEstimator()
+    estimates = [estimator.update(s) for s in samples]
+    valid = [e for e in estimates if e.status == Status.VALID]
+    assert len(valid) > 0.3 * len(estimates)
+    assert all(abs(e.mu_max / peak - 1.0) < 0.1 for e in valid)
+    assert all(e.detail.get("body_sum") == 1.0 for e in valid)
+    # The confidence says what such fits showed on the campaign: within 10 % four times in five.
+    assert all(0.685 <= e.confidence <= 0.85 for e in valid)
+
+
+def test_the_body_sum_is_not_used_where_the_wheels_torques_are_known_or_it_is_off():
+    _, slip = burckhardt_peak(DRY)
+    for estimator, samples in (
+            (LugreTrustRegionEstimator(), body_samples(DRY, lambda t: cycling_slips(t, slip), torques_unknown=False)),
+            (LugreTrustRegionEstimator(LugreTROptions(body_sum=False)), body_samples(DRY, lambda t: cycling_slips(t, slip)))):
+        statuses = {estimator.update(s).status for s in samples}
+        assert Status.VALID not in statuses
+        assert estimator.not_valid_reason == "too few usable samples"
+
+
+def test_a_held_slip_keeps_the_estimate_converging_and_says_why():
+    _, slip = burckhardt_peak(DRY)
+    estimator = LugreTrustRegionEstimator()
+    estimates = [estimator.update(s) for s in body_samples(DRY, lambda t: np.full(4, 0.6 * slip))]
+    assert Status.VALID not in {e.status for e in estimates}
+    assert estimates[-1].status == Status.CONVERGING
+    assert estimator.not_valid_reason.startswith("no peak shown in the car's total force (wheels' slips not across")
+
+
+def test_a_master_cylinder_car_under_abs_gets_a_valid_estimate_from_its_body():
+    """The campaign's development stop 175: a car sending only its master-cylinder pressure, a
+    deceleration-triggered ABS on snow. After the ABS's first release no wheel's brake torque is
+    known, and without the body's sum the stop had no VALID output at all."""
+    from frictiond.campaign.score import estimator_scores
+
+    from .test_estimator import campaign_stop_estimates
+
+    stop, estimates = campaign_stop_estimates(175)
+    assert stop.spec.sensors.master_only
+    scores = estimator_scores(estimates, stop.truth)
+    assert scores["valid"] > 200
+    assert scores["false_valid"] == 0
+    assert scores["mae_rel"] < 0.05
+    assert all(e.detail.get("body_sum") == 1.0 for e in estimates if e.status == Status.VALID)
+    _, without = campaign_stop_estimates(175, body_sum=False)
+    assert estimator_scores(without, stop.truth)["valid"] == 0

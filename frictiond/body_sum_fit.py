@@ -32,6 +32,8 @@ from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian, peak
 # Slips (as multiples of the fitted peak slip) a wheel must have spent time below and past.
 SPAN_BELOW = 0.8
 SPAN_PAST = 1.2
+# The verdict of a fit whose curve does not describe the four wheels: the road may be changing.
+MISFIT = "one curve does not fit the four wheels"
 # Gauss–Newton on ln θ: the steps a fit may take, and the step size that ends it.
 MAX_STEPS = 12
 STEP_TOLERANCE = 1e-4
@@ -154,7 +156,7 @@ class BodySumFit:
         elif not (spans[LEFT_WHEELS,].any() and spans[RIGHT_WHEELS,].any()):
             verdict = "wheels' slips not across the fitted peak on both sides"
         elif rms_share > o.max_rms_share:
-            verdict = "one curve does not fit the four wheels"
+            verdict = MISFIT
         elif lateral_mu > o.max_lateral_mu:
             verdict = "turning"
         return BodySumResult(mu_max, slip_star, math.exp(x), rms_share, tuple(spans.tolist()), lateral_mu, len(body),

@@ -2,19 +2,20 @@
 
 A car that sends one master-cylinder pressure for all wheels: once its ABS releases a wheel, no
 wheel's brake torque is known, and so no wheel's μ. The accelerometer still measures the sum,
-Σ N_i μ(λ_i, v) / Σ N_i, with the four slips and loads known. One θ of the static LuGre curve,
-its shape held at the priors, shared by the four wheels and fitted to that sum over the last
-`window_s`, gives a μ_max.
+Σ N_i μ(λ_i, v) / Σ N_i, with the four slips and loads known. The static LuGre curve, its shape
+held at the priors, with one θ per side of the car (the wheels of a side roll on one road),
+fitted to that sum over the last `window_s`, gives a μ_max: the sides' peaks weighted by load.
 
-A sum constrains the curve only over the slips the wheels swept. It shows the peak where a
-wheel on each side of the car spent `span_share` of the window below 0.8 and past 1.2 times the
-fitted peak slip: their μ passed over the peak, and the sum's top is the curve's (on split μ a
-side whose wheels never crossed it would lend the sum an unshown peak). A slip controller holding
-its wheels short of the peak, or a gentle stop, sweeps no such span. Rows with a wheel far past
-the peak are left out, and a window made mostly of them shows nothing (`BodySumFit._fit`).
-Residuals above `max_rms_share` of μ_max mean one θ does not describe the four wheels (a change
-of road, two roads); in a turn (`max_lateral_mu`) the tyres' lateral force takes grip the sum
-does not see.
+A sum constrains the curves only over the slips the wheels swept. It shows the peak where a
+wheel on each side spent `span_share` of the window below 0.8 and past 1.2 times its side's
+fitted peak slip: their μ passed over the peak, and the sum's top is the curves'. A slip
+controller holding its wheels short of the peak, or a gentle stop, sweeps no such span. Rows with
+a wheel far past the peak are left out, and a window made mostly of them shows nothing
+(`BodySumFit._fit`). The sum can trade one side's θ against the other's (on the campaign's
+split-μ stops the two fits swapped roads within a second), so it is evidence of one road only:
+the sides' peaks must agree within `max_side_ratio`. Residuals above `max_rms_share` of μ_max
+mean the curves do not describe the wheels (a change of road); in a turn (`max_lateral_mu`) the
+tyres' lateral force takes grip the sum does not see.
 Pure numerics: nothing of CAN or of the front end.
 """
 from __future__ import annotations
@@ -27,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .samples import LEFT_WHEELS, RIGHT_WHEELS
+
+SIDE_OF_WHEEL = tuple(0 if i in LEFT_WHEELS else 1 for i in range(4))
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian, peak
 
 # Slips (as multiples of the fitted peak slip) a wheel must have spent time below and past.
@@ -34,6 +37,8 @@ SPAN_BELOW = 0.8
 SPAN_PAST = 1.2
 # The verdict of a fit whose curve does not describe the four wheels: the road may be changing.
 MISFIT = "one curve does not fit the four wheels"
+# The verdict of sides whose fitted peaks differ: the sum cannot tell split μ (below).
+SIDES_DIFFER = "the two sides' fitted peaks differ"
 # Gauss–Newton on ln θ: the steps a fit may take, and the step size that ends it.
 MAX_STEPS = 12
 STEP_TOLERANCE = 1e-4
@@ -50,6 +55,7 @@ class BodySumOptions:
     max_slip_ratio: float = 2.0      # rows fitted: every wheel within this many times the fitted peak slip ...
     min_near_share: float = 0.5      # ... at least this share of the window's rows
     span_share: float = 0.1          # a wheel spans the peak: this share of the rows each side of it
+    max_side_ratio: float = 1.15     # one road: the sides' fitted peaks within this ratio
     max_rms_share: float = 0.06      # one curve fits: the residuals' rms within this share of μ_max ...
     misfit_block_s: float = 0.05     # ... the rms of their means over this long (the accelerometer's noise averaged)
     max_lateral_mu: float = 0.05     # going straight: the window's lateral μ at most this
@@ -71,24 +77,26 @@ class BodySumResult:
 
 
 class BodySumFit:
-    """The rows of the car's total force and slips, and the shared-θ fit to them."""
+    """The rows of the car's total force and slips, and the fit of the sides' θ to them."""
 
     def __init__(self, shape: LugreParams, prior_theta: float, prior_std_log_theta: float,
-                 theta_bounds: tuple[float, float], options: BodySumOptions | None = None) -> None:
+                 theta_bounds: tuple[float, float], side_coupling_std: float,
+                 options: BodySumOptions | None = None) -> None:
         self.options = options or BodySumOptions()
         self._shape = shape
         self._prior_log_theta = math.log(prior_theta)
         self._prior_std = prior_std_log_theta
+        self._side_coupling_std = side_coupling_std
         self._log_bounds = (math.log(theta_bounds[0]), math.log(theta_bounds[1]))
         self._rows: deque[tuple[float, float, tuple[float, ...], tuple[float, ...], float, float]] = deque()
-        self._log_theta = self._prior_log_theta
+        self._log_thetas = np.full(2, self._prior_log_theta)
         self._last_fit_s = -math.inf
         self._last: BodySumResult | None = None
 
     def clear(self) -> None:
         """Forget the rows and the last fit (a new stop, a new road)."""
         self._rows.clear()
-        self._log_theta = self._prior_log_theta
+        self._log_thetas = np.full(2, self._prior_log_theta)
         self._last_fit_s = -math.inf
         self._last = None
 
@@ -124,69 +132,88 @@ class BodySumFit:
 
     def _fit(self, times: np.ndarray, speed: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray,
              lateral_mu: float, speed_now: float) -> BodySumResult:
-        """θ fitted to every row, then again to the rows whose wheels all stay within
-        `max_slip_ratio` of the fitted peak slip; the peak and the evidence from those.
+        """θ per side fitted to every row, then again to the rows whose wheels all stay within
+        `max_slip_ratio` of their side's fitted peak slip; the peaks and the evidence from those.
 
         A wheel far past its peak gives its tyre's sliding level: from 5 % (a Burckhardt dry
         tyre) to 55 % (a Magic Formula tyre with C = 2.5) below the peak. The curve, its shape at
         the priors, falls about 12 % there: rows with such a wheel would pull the fitted peak
         towards the sliding level. Near the peak every tyre's curve is round, as the model's."""
         o = self.options
-        x = self._solve(self._log_theta, speed, slips, shares, body)
-        params = dataclasses.replace(self._shape, theta=math.exp(x))
-        _, slip_star = peak(speed_now, params)
-        near = slips.max(axis=1) <= o.max_slip_ratio * slip_star
-        rows = int(near.sum())
-        enough = rows >= max(o.min_rows, o.min_near_share * len(body))
+        x = self._solve(self._log_thetas, speed, slips, shares, body)
+        _, wheel_slip = self._peaks(x, speed_now)
+        near = (slips <= o.max_slip_ratio * wheel_slip).all(axis=1)
+        enough = int(near.sum()) >= max(o.min_rows, o.min_near_share * len(body))
         if enough:
             times, speed, slips, shares, body = times[near], speed[near], slips[near], shares[near], body[near]
             x = self._solve(x, speed, slips, shares, body)
-        self._log_theta = x
+        self._log_thetas = x
         model, _ = self._sum_and_slope(slips, speed[:, None], shares, x)
-        params = dataclasses.replace(self._shape, theta=math.exp(x))
-        mu_max, slip_star = peak(speed_now, params)
+        wheel_mu, wheel_slip = self._peaks(x, speed_now)
+        share = shares.mean(axis=0)
+        mu_max = float(share @ wheel_mu)
         period = float(np.median(np.diff(times))) if len(times) > 1 else o.misfit_block_s
         rms_share = _block_rms(model - body, o.misfit_block_s / max(period, 1e-6)) / max(mu_max, 1e-6)
-        below = (slips <= SPAN_BELOW * slip_star).mean(axis=0)
-        past = (slips >= SPAN_PAST * slip_star).mean(axis=0)
+        below = (slips <= SPAN_BELOW * wheel_slip).mean(axis=0)
+        past = (slips >= SPAN_PAST * wheel_slip).mean(axis=0)
         spans = (below >= o.span_share) & (past >= o.span_share)
         verdict = ""
         if not enough:
             verdict = "wheels deep past the peak"
         elif not (spans[LEFT_WHEELS,].any() and spans[RIGHT_WHEELS,].any()):
             verdict = "wheels' slips not across the fitted peak on both sides"
+        elif max(wheel_mu) > o.max_side_ratio * max(min(wheel_mu), 1e-9):
+            verdict = SIDES_DIFFER
         elif rms_share > o.max_rms_share:
             verdict = MISFIT
         elif lateral_mu > o.max_lateral_mu:
             verdict = "turning"
-        return BodySumResult(mu_max, slip_star, math.exp(x), rms_share, tuple(spans.tolist()), lateral_mu, len(body),
-                             verdict)
+        return BodySumResult(mu_max, float(share @ wheel_slip), float(np.exp(x).mean()), rms_share,
+                             tuple(spans.tolist()), lateral_mu, len(body), verdict)
 
-    def _solve(self, x: float, speed: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray) -> float:
-        """Gauss–Newton on ln θ from `x`: the prior a weak pull, the bounds a clamp."""
+    def _peaks(self, x: np.ndarray, speed: float) -> tuple[np.ndarray, np.ndarray]:
+        """Each wheel's peak (μ, λ) at `speed`: its side's θ."""
+        sides = [peak(speed, dataclasses.replace(self._shape, theta=math.exp(float(value)))) for value in x]
+        mu = np.array([sides[SIDE_OF_WHEEL[i]][0] for i in range(4)])
+        slip = np.array([sides[SIDE_OF_WHEEL[i]][1] for i in range(4)])
+        return mu, slip
+
+    def _solve(self, x: np.ndarray, speed: np.ndarray, slips: np.ndarray, shares: np.ndarray,
+               body: np.ndarray) -> np.ndarray:
+        """Gauss–Newton on the sides' ln θ from `x`: the prior a weak pull on each, the sides held
+        together as the wheels' fit holds them (`side_coupling_std`), the bounds a clamp."""
         prior_weight = self.options.measurement_std / self._prior_std
+        coupling_weight = self.options.measurement_std / self._side_coupling_std
         v = speed[:, None]
+        x = np.array(x, dtype=float)
         for _ in range(MAX_STEPS):
-            model, slope = self._sum_and_slope(slips, v, shares, x)
+            model, jac = self._sum_and_slope(slips, v, shares, x)
             residual = model - body
-            prior_residual = prior_weight * (x - self._prior_log_theta)
-            normal = float(slope @ slope) + prior_weight * prior_weight
-            step = -(float(slope @ residual) + prior_weight * prior_residual) / normal
-            step = max(-MAX_LOG_STEP, min(MAX_LOG_STEP, step))
-            x_new = min(max(x + step, self._log_bounds[0]), self._log_bounds[1])
-            done = abs(x_new - x) < STEP_TOLERANCE
+            prior = prior_weight * (x - self._prior_log_theta)
+            coupling = coupling_weight * (x[0] - x[1])
+            normal = jac.T @ jac + prior_weight ** 2 * np.eye(2) + coupling_weight ** 2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+            gradient = jac.T @ residual + prior_weight * prior + coupling_weight * coupling * np.array([1.0, -1.0])
+            step = np.clip(-np.linalg.solve(normal, gradient), -MAX_LOG_STEP, MAX_LOG_STEP)
+            x_new = np.clip(x + step, *self._log_bounds)
+            done = float(np.abs(x_new - x).max()) < STEP_TOLERANCE
             x = x_new
             if done:
                 break
         return x
 
     def _sum_and_slope(self, slips: np.ndarray, v: np.ndarray, shares: np.ndarray,
-                       log_theta: float) -> tuple[np.ndarray, np.ndarray]:
-        """The load-weighted sum of the four wheels' μ per row, and its derivative in ln θ."""
-        theta = math.exp(log_theta)
-        params = dataclasses.replace(self._shape, theta=theta)
-        mu, jac = mu_and_jacobian(slips, v, params, ("theta",))
-        return (shares * mu).sum(axis=1), (shares * jac[..., 0]).sum(axis=1) * theta
+                       log_thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The load-weighted sum of the four wheels' μ per row, and its derivatives in the sides'
+        ln θ (one column per side)."""
+        total = np.zeros(len(slips))
+        jac = np.zeros((len(slips), 2))
+        for side, wheels in enumerate((LEFT_WHEELS, RIGHT_WHEELS)):
+            theta = math.exp(float(log_thetas[side]))
+            cols = list(wheels)
+            mu, d_theta = mu_and_jacobian(slips[:, cols], v, dataclasses.replace(self._shape, theta=theta), ("theta",))
+            total += (shares[:, cols] * mu).sum(axis=1)
+            jac[:, side] = (shares[:, cols] * d_theta[..., 0]).sum(axis=1) * theta
+        return total, jac
 
 
 def _block_rms(residuals: np.ndarray, rows_per_block: float) -> float:

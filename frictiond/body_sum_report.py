@@ -28,7 +28,8 @@ class BodySumReport:
         o = self.options
         shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
                             alpha=o.alpha, patch_length=o.patch_length)
-        self._body_sum = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max))
+        self._body_sum = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),
+                                    o.left_right_coupling)
         self._body_sum_history: deque[tuple[float, float]] = deque()
 
     def _clear_body_sum(self) -> None:

@@ -13,8 +13,9 @@ controller holding its wheels short of the peak, or a gentle stop, sweeps no suc
 a wheel far past the peak are left out, and a window made mostly of them shows nothing
 (`BodySumFit._fit`). The sum can trade one side's θ against the other's (on the campaign's
 split-μ stops the two fits swapped roads within a second), so it is evidence of one road only:
-the sides' peaks must agree within `max_side_ratio`. Residuals above `max_rms_share` of μ_max
-mean the curves do not describe the wheels (a change of road); in a turn (`max_lateral_mu`) the
+the sides' peaks must agree within `max_side_ratio`, and so must the window's older and newer
+halves fitted apart (a change of road). Residuals above `max_rms_share` of μ_max mean the curves
+do not describe the wheels; in a turn (`max_lateral_mu`) the
 tyres' lateral force takes grip the sum does not see.
 Pure numerics: nothing of CAN or of the front end.
 """
@@ -37,6 +38,8 @@ SPAN_BELOW = 0.8
 SPAN_PAST = 1.2
 # The verdict of a fit whose curve does not describe the four wheels: the road may be changing.
 MISFIT = "one curve does not fit the four wheels"
+# The verdict of the newest rows straying from the last fit: the window starts again.
+ROAD_CHANGE = "the road changing"
 # The verdict of sides whose fitted peaks differ: the sum cannot tell split μ (below).
 SIDES_DIFFER = "the two sides' fitted peaks differ"
 # Gauss–Newton on ln θ: the steps a fit may take, and the step size that ends it.
@@ -55,9 +58,11 @@ class BodySumOptions:
     max_slip_ratio: float = 2.0      # rows fitted: every wheel within this many times the fitted peak slip ...
     min_near_share: float = 0.5      # ... at least this share of the window's rows
     span_share: float = 0.1          # a wheel spans the peak: this share of the rows each side of it
-    max_side_ratio: float = 1.15     # one road: the sides' fitted peaks within this ratio
+    max_side_ratio: float = 1.15     # one road: the sides' fitted peaks, and the window's halves', within this ratio
     max_rms_share: float = 0.06      # one curve fits: the residuals' rms within this share of μ_max ...
     misfit_block_s: float = 0.05     # ... the rms of their means over this long (the accelerometer's noise averaged)
+    innovation_window_s: float = 0.1  # a change of road: the newest this long of rows ...
+    max_innovation_share: float = 0.1  # ... off the last fit by this share of its μ_max on average
     max_lateral_mu: float = 0.05     # going straight: the window's lateral μ at most this
 
 
@@ -122,6 +127,13 @@ class BodySumFit:
             rows.popleft()
         if len(rows) < o.min_rows or rows[-1][0] - rows[0][0] < 0.5 * o.window_s:
             return None
+        if self._road_changed():
+            # (the rows before the change describe the old road: the window starts again)
+            while rows and rows[0][0] < rows[-1][0] - o.innovation_window_s:
+                rows.popleft()
+            changed = dataclasses.replace(self._last, verdict=ROAD_CHANGE)
+            self._last = None
+            return changed
         if self._last is not None and now_s - self._last_fit_s < o.fit_every_s:
             return self._last
         self._last_fit_s = now_s
@@ -129,6 +141,27 @@ class BodySumFit:
                                np.array([r[2] for r in rows]), np.array([r[3] for r in rows]),
                                np.array([r[4] for r in rows]), max(r[5] for r in rows), max(speed_mps, o.min_speed_mps))
         return self._last
+
+    def _road_changed(self) -> bool:
+        """Whether the newest `innovation_window_s` of rows stray from the last fit by more than
+        `max_innovation_share` of its μ_max on average: a change of road, seen at once rather
+        than when the window's halves disagree. Their noise averages over an ABS cycle's rows;
+        the fit's own misfit is within `max_rms_share`."""
+        o = self.options
+        last = self._last
+        if last is None or last.verdict == ROAD_CHANGE:
+            return False
+        newest = []
+        for row in reversed(self._rows):
+            if row[0] < self._rows[-1][0] - o.innovation_window_s:
+                break
+            newest.append(row)
+        if len(newest) < 4:
+            return False
+        model, _ = self._sum_and_slope(np.array([r[2] for r in newest]), np.array([[r[1]] for r in newest]),
+                                       np.array([r[3] for r in newest]), self._log_thetas)
+        residual = float(np.mean(np.array([r[4] for r in newest]) - model))
+        return abs(residual) > o.max_innovation_share * last.mu_max
 
     def _fit(self, times: np.ndarray, speed: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray,
              lateral_mu: float, speed_now: float) -> BodySumResult:
@@ -164,12 +197,26 @@ class BodySumFit:
             verdict = "wheels' slips not across the fitted peak on both sides"
         elif max(wheel_mu) > o.max_side_ratio * max(min(wheel_mu), 1e-9):
             verdict = SIDES_DIFFER
-        elif rms_share > o.max_rms_share:
+        elif rms_share > o.max_rms_share or self._halves_differ(x, times, speed, slips, shares, body, speed_now):
             verdict = MISFIT
         elif lateral_mu > o.max_lateral_mu:
             verdict = "turning"
         return BodySumResult(mu_max, float(share @ wheel_slip), float(np.exp(x).mean()), rms_share,
                              tuple(spans.tolist()), lateral_mu, len(body), verdict)
+
+    def _halves_differ(self, x: np.ndarray, times: np.ndarray, speed: np.ndarray, slips: np.ndarray,
+                       shares: np.ndarray, body: np.ndarray, speed_now: float) -> bool:
+        """Whether the window's older and newer halves, fitted apart, give peaks further apart
+        than `max_side_ratio`: the road changed within it. Two θ can fit a sum that mixes two
+        roads in time about as well as one road, so the residuals alone do not show it."""
+        newer = times >= 0.5 * (times[0] + times[-1])
+        peaks = []
+        for half in (~newer, newer):
+            if int(half.sum()) < self.options.min_rows // 2:
+                return False
+            fitted = self._solve(x, speed[half], slips[half], shares[half], body[half])
+            peaks.append(float(shares[half].mean(axis=0) @ self._peaks(fitted, speed_now)[0]))
+        return max(peaks) > self.options.max_side_ratio * max(min(peaks), 1e-9)
 
     def _peaks(self, x: np.ndarray, speed: float) -> tuple[np.ndarray, np.ndarray]:
         """Each wheel's peak (μ, λ) at `speed`: its side's θ."""

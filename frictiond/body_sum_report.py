@@ -13,7 +13,7 @@ import math
 from collections import deque
 
 from . import input_quality, not_valid
-from .body_sum_fit import MISFIT, BodySumFit
+from .body_sum_fit import MISFIT, ROAD_CHANGE, BodySumFit
 from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
 from .tyre_model import LugreParams
 
@@ -70,7 +70,7 @@ class BodySumReport:
             # One ABS cycle without evidence keeps a VALID, as the wheels' fit's does; a curve that
             # no longer fits does not: the road may be changing under it.
             recent = self._last_valid is not None and now_s - self._last_excited_s <= o.excitation_hold_s
-            if recent and fit.verdict != MISFIT:
+            if recent and fit.verdict not in (MISFIT, ROAD_CHANGE):
                 return self._hold(now_s, speed)
             self._not_valid = not_valid.body_sum_reason(fit.verdict)
             confidence = 0.0

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from frictiond.body_sum_fit import SIDES_DIFFER, BodySumFit, BodySumOptions
+from frictiond.body_sum_fit import ROAD_CHANGE, SIDES_DIFFER, BodySumFit, BodySumOptions
 from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
 from frictiond.samples import PhysicalSample, Status
 from frictiond.tyre_model import LugreParams
@@ -129,15 +129,26 @@ def test_wheels_dwelling_past_the_peak_show_nothing():
     assert deep.verdict == "wheels deep past the peak"
 
 
-def test_a_change_of_road_in_the_window_is_a_misfit():
-    """Dry asphalt for the first 0.5 s of the window, wet (peak 0.80) for the rest."""
+def test_a_change_of_road_is_seen_at_once_and_starts_the_window_again():
+    """Dry asphalt for 0.7 s, then wet (peak 0.80): the newest rows stray from the dry fit, and
+    the window restarts from them."""
     _, dry_slip = burckhardt_peak(DRY)
     wet_curve = (0.857, 33.822, 0.347)
-    dry = rows([DRY] * 4, lambda t: cycling_slips(t, dry_slip), seconds=1.2)
-    wet = rows([wet_curve] * 4, lambda t: cycling_slips(t, dry_slip), seconds=1.2)
-    result = fitted(new_fit(), dry[:70] + wet[70:])
-    assert result.verdict == "one curve does not fit the four wheels"
-    assert fitted(new_fit(), wet).verdict == ""
+    dry = rows([DRY] * 4, lambda t: cycling_slips(t, dry_slip), seconds=2.5)
+    wet = rows([wet_curve] * 4, lambda t: cycling_slips(t, dry_slip), seconds=2.5)
+    fit = new_fit()
+    verdicts = []
+    for row in dry[:70] + wet[70:]:
+        fit.push(*row)
+        result = fit.result(row[0], row[1])
+        verdicts.append((row[0], result.verdict if result else None))
+    seen = [t for t, v in verdicts if v == ROAD_CHANGE]
+    assert seen and 0.7 <= seen[0] <= 0.8
+    assert all(v is None for t, v in verdicts if seen[0] < t < seen[0] + 0.35)   # (the window refills)
+    assert verdicts[-1][1] == ""
+    assert result.mu_max == pytest.approx(burckhardt_peak(wet_curve)[0], rel=0.1)
+    unseen = new_fit(max_innovation_share=10.0)
+    assert ROAD_CHANGE not in {fitted(unseen, dry[:k] + wet[k:]).verdict for k in (70,)}
 
 
 def test_turning_shows_nothing():

@@ -31,7 +31,8 @@ import numpy as np
 from .samples import LEFT_WHEELS, RIGHT_WHEELS
 
 SIDE_OF_WHEEL = tuple(0 if i in LEFT_WHEELS else 1 for i in range(4))
-from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian, peak
+_SIDE_INDEX = np.array(SIDE_OF_WHEEL)
+from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian_theta, peak
 
 # Slips (as multiples of the fitted peak slip) a wheel must have spent time below and past.
 SPAN_BELOW = 0.8
@@ -44,7 +45,7 @@ ROAD_CHANGE = "the road changing"
 SIDES_DIFFER = "the two sides' fitted peaks differ"
 # Gauss–Newton on ln θ: the steps a fit may take, and the step size that ends it.
 MAX_STEPS = 12
-STEP_TOLERANCE = 1e-4
+STEP_TOLERANCE = 1e-3
 MAX_LOG_STEP = 0.7
 
 
@@ -252,15 +253,11 @@ class BodySumFit:
                        log_thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The load-weighted sum of the four wheels' μ per row, and its derivatives in the sides'
         ln θ (one column per side)."""
-        total = np.zeros(len(slips))
-        jac = np.zeros((len(slips), 2))
-        for side, wheels in enumerate((LEFT_WHEELS, RIGHT_WHEELS)):
-            theta = math.exp(float(log_thetas[side]))
-            cols = list(wheels)
-            mu, d_theta = mu_and_jacobian(slips[:, cols], v, dataclasses.replace(self._shape, theta=theta), ("theta",))
-            total += (shares[:, cols] * mu).sum(axis=1)
-            jac[:, side] = (shares[:, cols] * d_theta[..., 0]).sum(axis=1) * theta
-        return total, jac
+        thetas = np.exp(np.asarray(log_thetas, dtype=float))[_SIDE_INDEX]
+        mu, d_theta = mu_and_jacobian_theta(slips, v, thetas, self._shape, ("theta",))
+        weighted = shares * d_theta[..., 0] * thetas
+        jac = np.stack((weighted[:, LEFT_WHEELS,].sum(axis=1), weighted[:, RIGHT_WHEELS,].sum(axis=1)), axis=1)
+        return (shares * mu).sum(axis=1), jac
 
 
 def _block_rms(residuals: np.ndarray, rows_per_block: float) -> float:

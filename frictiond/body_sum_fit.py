@@ -150,7 +150,7 @@ class BodySumFit:
         the fit's own misfit is within `max_rms_share`."""
         o = self.options
         last = self._last
-        if last is None or last.verdict == ROAD_CHANGE:
+        if last is None:   # (none yet, or a change just started the window again)
             return False
         newest = []
         for row in reversed(self._rows):

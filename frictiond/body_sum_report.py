@@ -2,8 +2,8 @@
 
 `BodySumReport` is a part of `LugreTrustRegionEstimator`: while the front end says no wheel's
 brake torque is known (`PhysicalSample.wheel_torques_unknown`: one master-cylinder pressure, an
-ABS releasing wheels), no wheel's μ enters the window, and μ_max comes from the shared-θ fit of
-the body's force (`body_sum_fit`) instead. Its confidence is the probability of μ_max within
+ABS releasing wheels), no wheel's μ enters the window, and μ_max comes from the fit of the
+sides' θ to the body's force (`body_sum_fit`) instead. Its confidence is the probability of μ_max within
 `confidence_band` under a normal error of σ² = the fit's measured mismatch
 (`body_sum_mismatch`)² + its drift² + the accelerometer's and the drag's doubt²/3.
 """

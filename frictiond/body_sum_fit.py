@@ -15,9 +15,8 @@ a wheel far past the peak are left out, and a window made mostly of them shows n
 split-μ stops the two fits swapped roads within a second), so it is evidence of one road only:
 the sides' peaks must agree within `max_side_ratio`, and so must the window's older and newer
 halves fitted apart (a change of road). Residuals above `max_rms_share` of μ_max mean the curves
-do not describe the wheels; in a turn (`max_lateral_mu`) the
-tyres' lateral force takes grip the sum does not see.
-Pure numerics: nothing of CAN or of the front end.
+do not describe the wheels; in a turn (`max_lateral_mu`) the tyres' lateral force takes grip the
+sum does not see. Pure numerics: nothing of CAN or of the front end.
 """
 from __future__ import annotations
 
@@ -28,11 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .samples import LEFT_WHEELS, RIGHT_WHEELS
-
-SIDE_OF_WHEEL = tuple(0 if i in LEFT_WHEELS else 1 for i in range(4))
-_SIDE_INDEX = np.array(SIDE_OF_WHEEL)
+from .samples import LEFT_WHEELS, N_WHEELS, RIGHT_WHEELS
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian_theta, peak
+
+# Each wheel's side (0 left, 1 right): the index of its θ.
+_SIDE_INDEX = np.array([0 if i in LEFT_WHEELS else 1 for i in range(N_WHEELS)])
 
 # Slips (as multiples of the fitted peak slip) a wheel must have spent time below and past.
 SPAN_BELOW = 0.8
@@ -221,10 +220,8 @@ class BodySumFit:
 
     def _peaks(self, x: np.ndarray, speed: float) -> tuple[np.ndarray, np.ndarray]:
         """Each wheel's peak (μ, λ) at `speed`: its side's θ."""
-        sides = [peak(speed, dataclasses.replace(self._shape, theta=math.exp(float(value)))) for value in x]
-        mu = np.array([sides[SIDE_OF_WHEEL[i]][0] for i in range(4)])
-        slip = np.array([sides[SIDE_OF_WHEEL[i]][1] for i in range(4)])
-        return mu, slip
+        sides = np.array([peak(speed, dataclasses.replace(self._shape, theta=math.exp(float(value)))) for value in x])
+        return sides[_SIDE_INDEX, 0], sides[_SIDE_INDEX, 1]
 
     def _solve(self, x: np.ndarray, speed: np.ndarray, slips: np.ndarray, shares: np.ndarray,
                body: np.ndarray) -> np.ndarray:

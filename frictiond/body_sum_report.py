@@ -31,6 +31,7 @@ class BodySumReport:
         self._body_sum = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),
                                     o.left_right_coupling)
         self._body_sum_history: deque[tuple[float, float]] = deque()
+        self._body_force_doubt = 0.0   # the newest row's (`PhysicalSample.body_force_doubt`)
 
     def _clear_body_sum(self) -> None:
         self._body_sum.clear()
@@ -54,6 +55,8 @@ class BodySumReport:
         history.append((now_s, mu_max))
         while history and history[0][0] < now_s - DRIFT_WINDOW_S:
             history.popleft()
+        if speed < o.peak_evidence_min_speed:
+            return self._hold(now_s, speed)   # (a stop ending: a VALID standing is held, as the wheels' fit's)
         scale = max(mu_max, 0.05)
         drift = (max(m for _, m in history) - min(m for _, m in history)) / scale
         doubt = self._body_force_doubt / scale
@@ -64,8 +67,6 @@ class BodySumReport:
                   "body_sum_rows": float(fit.rows)}
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
-        if speed < o.peak_evidence_min_speed:
-            return self._hold(now_s, speed)   # (a stop ending: a VALID standing is held, as the wheels' fit's)
         if fit.verdict:
             # One ABS cycle without evidence keeps a VALID, as the wheels' fit's does; a curve that
             # no longer fits does not: the road may be changing under it.

@@ -526,7 +526,6 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._last_fit_s = -math.inf
         self._last_update_s: float | None = None
         self._cov_unit: np.ndarray | None = None
-        self._body_force_doubt = 0.0
         self._init_body_sum()
 
     def _new_event(self) -> None:

@@ -19,15 +19,21 @@ def braking_samples(scenarios: Sequence[str] = ("dry", "wet", "snow", "split_mu"
     samples = []
     for k, scenario in enumerate(scenarios):
         frames, _ = simulate_frames(config, scenario, seed=seed + k, time_offset_s=100.0 * k)
-        pipeline = Pipeline(config)
-        previous = None
-        for frame in frames:
-            # pipeline.last_sample is the sample the estimator was just updated with (it stays
-            # set while the pipeline holds an estimate: record each one once).
-            if pipeline.process(frame) and pipeline.last_sample is not None and pipeline.last_sample is not previous:
-                previous = pipeline.last_sample
-                samples.append(previous)
+        samples += pipeline_samples(Pipeline(config), frames)
     return config, samples
+
+
+def pipeline_samples(pipeline: Pipeline, frames) -> list:
+    """The PhysicalSamples `pipeline` updates its estimator with over `frames`, in order."""
+    samples = []
+    previous = None
+    for frame in frames:
+        # pipeline.last_sample is the sample the estimator was just updated with (it stays
+        # set while the pipeline holds an estimate: record each one once).
+        if pipeline.process(frame) and pipeline.last_sample is not None and pipeline.last_sample is not previous:
+            previous = pipeline.last_sample
+            samples.append(previous)
+    return samples
 
 
 def percentile(values: Sequence[float], q: float) -> float:

@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import statistics
+import sys
 import time
+from pathlib import Path
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import pipeline_samples, summary_us  # noqa: E402
 
-from frictiond.estimator import LugreTrustRegionEstimator
+from frictiond.estimator import LugreTrustRegionEstimator  # noqa: E402
 
 
 def stop_samples(seed: int) -> tuple[list, object, object]:
@@ -26,31 +30,20 @@ def stop_samples(seed: int) -> tuple[list, object, object]:
 
     stop = simulate_stop(draw_stop(seed))
     pipeline = Pipeline(stop.config("lugre-tr"))
-    samples = []
-    original = LugreTrustRegionEstimator.update
-
-    def capture(self, sample):
-        samples.append(sample)
-        return original(self, sample)
-
-    # (on the class: the pipeline builds its estimator again once it has measured the cycle time)
-    LugreTrustRegionEstimator.update = capture
-    try:
-        for frame in stop.frames:
-            pipeline.process(frame)
-    finally:
-        LugreTrustRegionEstimator.update = original
+    samples = pipeline_samples(pipeline, stop.frames)
     return samples, pipeline.estimator.options, pipeline.estimator.vehicle
 
 
-def timed(options, vehicle, samples) -> np.ndarray:
+def timed(options, vehicle, samples, chosen: list[bool]) -> list[float]:
+    """Each chosen update's time, a fresh estimator fed every sample."""
     estimator = LugreTrustRegionEstimator(options, vehicle)
     times = []
-    for sample in samples:
+    for sample, keep in zip(samples, chosen):
         start = time.perf_counter()
         estimator.update(sample)
-        times.append(time.perf_counter() - start)
-    return np.array(times)
+        if keep:
+            times.append(time.perf_counter() - start)
+    return times
 
 
 def main(argv=None) -> int:
@@ -58,27 +51,25 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[175, 18, 859])
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args(argv)
-    with_fit, without = [], []
+    on: list[float] = []
+    off: list[float] = []
     for seed in args.seeds:
         samples, options, vehicle = stop_samples(seed)
-        body = np.array([s.wheel_torques_unknown and not any(s.usable) for s in samples])
-        if not body.any():
+        chosen = [s.wheel_torques_unknown and not any(s.usable) for s in samples]
+        if not any(chosen):
             print(f"stop {seed}: no update without a known wheel torque")
             continue
-        off = dataclasses.replace(options, body_sum=False)
+        without = dataclasses.replace(options, body_sum=False)
         for _ in range(args.repeat):
-            with_fit.append(timed(options, vehicle, samples)[body])
-            without.append(timed(off, vehicle, samples)[body])
-    if not with_fit:
+            on += timed(options, vehicle, samples, chosen)
+            off += timed(without, vehicle, samples, chosen)
+    if not on:
         return 1
-    on, off = np.concatenate(with_fit) * 1e6, np.concatenate(without) * 1e6
-    print(f"updates without a known wheel torque: n={len(on)} over {len(args.seeds)} stops × {args.repeat}")
-    print(f"body-sum fit on   median {np.median(on):8.1f} µs  p99 {np.quantile(on, 0.99):8.1f} µs  max {on.max():8.1f} µs"
-          f"  mean {on.mean():8.1f} µs")
-    print(f"body-sum fit off  median {np.median(off):8.1f} µs  p99 {np.quantile(off, 0.99):8.1f} µs  max {off.max():8.1f} µs"
-          f"  mean {off.mean():8.1f} µs")
-    print(f"ratio on / off (mean): {on.mean() / off.mean():.1f}x; share of a 10 ms bus cycle (mean): "
-          f"{on.mean() / 1e4:.1%}")
+    print(f"updates without a known wheel torque over {len(args.seeds)} stops × {args.repeat}")
+    print(f"body-sum fit on   {summary_us(on)}  mean {statistics.mean(on) * 1e6:8.1f} µs")
+    print(f"body-sum fit off  {summary_us(off)}  mean {statistics.mean(off) * 1e6:8.1f} µs")
+    print(f"ratio on / off (mean): {statistics.mean(on) / statistics.mean(off):.1f}x; share of a 10 ms bus cycle "
+          f"(mean): {statistics.mean(on) / 0.01:.1%}")
     return 0
 
 

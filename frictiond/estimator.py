@@ -508,6 +508,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._innovation_score = 0.0
         self._front_innovation_score = 0.0
         self._last_jump_s = -math.inf
+        self._rear_straddles_until_s = -math.inf   # (`_detect_jump`: the rear axle crossing a change of road)
         self._last_peak_slips: list[float] | None = None
         self._slip_support: list[float] | None = None
         self._capped: np.ndarray | None = None
@@ -678,6 +679,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             self._last_excited_s += step
         if math.isfinite(self._last_jump_s):
             self._last_jump_s += step
+        if math.isfinite(self._rear_straddles_until_s):
+            self._rear_straddles_until_s += step
         self._speed_error.shift(step)
         self._excited_since_s = math.inf
 

@@ -20,6 +20,8 @@ from .tyre_model import MAX_MODEL_SLIP, braking_mu_and_partials_few
 
 # A wheel verdict's proximity when the wheel's data contradict the fitted curve (`_wheel_verdict`).
 CONTRADICTED = -1.0
+# A rear wheel's verdict while its axle may be crossing a change of road met by the front one.
+REAR_CROSSING = "rear axle crossing a change of road"
 
 
 def _quantile_pair(values: np.ndarray, q_low: float, q_high: float) -> tuple[float, float]:
@@ -229,6 +231,8 @@ class PeakEvidence(RunawayEvidence):
             # stop 381 braked 0.15 s after start-up, the offset unlearnt: the dry side's slips
             # held at 0.11 "showed" it at 3.7 m/s, and 103 VALID outputs were 27 % low).
             return "too slow to show a peak", 0.0, True
+        if wheel >= 2 and self._rear_axle_crossing():
+            return REAR_CROSSING, 0.0, True
         if not peak_seen and not abs_working and not self._running_away(wheel, runaway_rate, lam_hi, mu_hi, speed):
             return "slip not running away", 0.0, True
         if lam_hi * speed < o.excitation_min_sliding_mps:
@@ -252,6 +256,11 @@ class PeakEvidence(RunawayEvidence):
         self._shape_proximity[wheel] = verdict[1]
         self._shape_verdict_s[wheel] = self._last_sample_s
         return verdict
+
+    def _rear_axle_crossing(self) -> bool:
+        """Whether the rear wheels' newest data may still straddle the change of road last
+        detected (`road_change.RoadChangeTest._detect_jump`)."""
+        return self._last_sample_s <= self._rear_straddles_until_s
 
     def _held_slip_verdict(self, wheel: int, lam_lo: float, lam_hi: float, mu_hi: float, mu_star: float,
                            lam_star: float, peak_seen: bool) -> tuple[Any, float, bool]:

@@ -66,14 +66,25 @@ class RoadChangeTest:
         score = abs(mean) / (noise / math.sqrt(n_recent))
         return score if same_sign > 0.7 else min(score, o.jump_threshold)
 
-    def _detect_jump(self, now_s: float, score: float) -> None:
-        """Drop the window's older samples when the newest ones disagree with the fit (a μ jump)."""
+    def _detect_jump(self, now_s: float, speed: float, score: float) -> None:
+        """Drop the window's older samples when the newest ones disagree with the fit (a μ jump).
+
+        A change of road met by the front axle reaches the rear one a wheelbase later. Until then,
+        and until the rear wheels' newest `excitation_window_s` of data lie past it, their slips
+        move from one road's curve to the other's: a slip controller's rear wheels then run from
+        wet asphalt's peak slip deeper into a dry road's rising branch, and μ falling as the slip
+        grows reads as a peak passed (dev 20614: VALID 34 % low). Their data show no peak till then.
+        The residuals do not tell a change met by the front axle from one both axles have met or
+        from a fit that strayed (the first fits of a stop): each is read as the first.
+        """
         o = self.options
         if score > o.jump_threshold * 2.0 and now_s - self._last_jump_s > o.jump_refractory_s:
             self._window.drop_before(now_s - o.jump_window_s - 1e-9, self.core)
             self._radius = None  # let the parameters move freely again
             self._jumps += 1
             self._last_jump_s = now_s
+            rear_crossing_s = self.vehicle.wheelbase / max(speed, 1.0)
+            self._rear_straddles_until_s = now_s + rear_crossing_s + o.excitation_window_s
             self._jump_times.append(now_s)
             # What was valid described the old road: nothing may be held VALID from it.
             self._last_valid = None

@@ -196,7 +196,7 @@ class WindowFit(RoadChangeTest):
         self._last_fit_s = now_s
         self._innovation_score = self._innovation(now_s, times, r_data, weights)
         estimate = self._report(now_s, speed, float(r_data @ r_data), normal, weights, w_sum, len(slip))
-        self._detect_jump(now_s, self._innovation_score)
+        self._detect_jump(now_s, speed, self._innovation_score)
         return estimate
 
     def _fit_compiled(self, now_s: float, speed: float) -> FrictionEstimate:
@@ -229,7 +229,7 @@ class WindowFit(RoadChangeTest):
         self._innovation_score = self._innovation_score_of(n_recent, mean, rms, same_sign) if counts else 0.0
         self._front_innovation_score = self._front_score(n_front, *front_bias) if counts else 0.0
         estimate = self._report(now_s, speed, residual_ss, normal, None, w_sum, m)
-        self._detect_jump(now_s, self._innovation_score)
+        self._detect_jump(now_s, speed, self._innovation_score)
         return estimate
 
     def _solve_numpy(self, sw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -10,7 +10,7 @@ import pytest
 from frictiond import tyre_model as tm
 from frictiond.baseline_rls import BurckhardtRLSEstimator, burckhardt_peak
 from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
-from frictiond.peak_evidence import CONTRADICTED
+from frictiond.peak_evidence import CONTRADICTED, REAR_CROSSING
 from frictiond.samples import FrictionEstimate, PhysicalSample, Status
 
 
@@ -164,6 +164,35 @@ def test_a_change_of_road_crossing_the_wheelbase_is_followed_to_the_rear_axle():
             first_right = s.time_s - rear_t
     assert est._jumps == 2
     assert first_right is not None and first_right < 0.45   # 0.56 s with a 0.3 s refractory time
+
+
+def test_the_rear_wheels_show_no_peak_while_their_axle_crosses_a_change_of_road():
+    """After a change of road is detected the rear axle meets it a wheelbase later (2.7 m here):
+    till then, and till the rear wheels' newest excitation window lies past it, their data mix
+    the two roads and show no peak; the front wheels' verdicts go on as before."""
+    dry, ice = lugre_curve(tm.LugreParams(theta=1.0)), lugre_curve(tm.LugreParams(theta=25.0))
+    front_t, rear_t = 1.5, 1.62
+    est = LugreTrustRegionEstimator()
+    o, wheelbase = est.options, est.vehicle.wheelbase
+    jumps, crossing_whys, other_rear_whys, front_whys = 0, [], [], []
+    for s in braking(lambda t, i: ice if t >= (rear_t if i >= 2 else front_t) else dry, v0=25.0, seed=3):
+        e = est.update(s)
+        if est._jumps != jumps:
+            jumps, until = est._jumps, s.time_s + wheelbase / s.speed_mps + o.excitation_window_s
+        if jumps == 0:
+            continue
+        assert not (e.status == Status.VALID and s.time_s >= front_t
+                    and abs(e.mu_max / tm.peak(s.speed_mps, tm.LugreParams(theta=25.0))[0] - 1.0) > 0.2)
+        why = [w if isinstance(w, str) else w[0] for w in est._excitation_why]
+        crossing_whys += [(s.time_s, until) for w in why[2:] if w == REAR_CROSSING]
+        other_rear_whys += [s.time_s for w in why[2:] if w and w != REAR_CROSSING]
+        front_whys += why[:2]
+    assert jumps == 2 and crossing_whys
+    assert all(t <= until + 1e-9 for t, until in crossing_whys)
+    # (the verdicts are refreshed every `excitation_every` fits: the last may stand a few samples)
+    assert max(t for t, _ in crossing_whys) > crossing_whys[-1][1] - 0.05
+    assert any(t > crossing_whys[-1][1] for t in other_rear_whys)
+    assert REAR_CROSSING not in front_whys
 
 
 def test_state_round_trip_is_used_as_prior():
@@ -913,23 +942,28 @@ def test_a_change_of_road_under_the_front_axle_alone_costs_confidence(monkeypatc
     seed 50431, 27 km/h): the front axle 0.4 s before the rear. Pooled with the rear wheels'
     residuals, still on the wet road, the front's bias failed the same-sign test, and the wet
     road's μ stayed VALID (confidence up to 0.64) while the car's grip was 42–44 % higher. The
-    front axle's own residuals now cost confidence; the last fit before the car crawls below the
+    front axle's own residuals cost confidence; the last fit before the car crawls below the
     speed that slip can be measured at (from 1.85 s, where the rear axle meets the dry road
-    unseen) is held at that confidence."""
-    from frictiond import road_change
+    unseen) is held at that confidence. Since the rear wheels show no peak for a wheelbase
+    after a detected change (one at 1.43 s here), their wet-road data excite nothing either."""
+    from frictiond import peak_evidence, road_change
 
-    def last_confidence(front_test: bool) -> float:
-        if not front_test:
-            monkeypatch.setattr(road_change.RoadChangeTest, "_front_score", lambda self, *bias: 0.0)
-        stop, estimates = campaign_stop_estimates(50431, family="*/*/jump")
-        moving = [e for e in estimates if 1.5 <= e.time_s <= 1.85]
+    def confidences(front_test: bool, rear_crossing: bool) -> list[float]:
+        with monkeypatch.context() as patch:
+            if not front_test:
+                patch.setattr(road_change.RoadChangeTest, "_front_score", lambda self, *bias: 0.0)
+            if not rear_crossing:
+                patch.setattr(peak_evidence.PeakEvidence, "_rear_axle_crossing", lambda self: False)
+            stop, estimates = campaign_stop_estimates(50431, family="*/*/jump")
+        moving = [e.confidence for e in estimates if 1.5 <= e.time_s <= 1.85]
         assert moving
-        return moving[-1].confidence
+        return moving
 
-    with_front = last_confidence(True)
-    without = last_confidence(False)
+    with_front = confidences(True, False)[-1]
+    without = confidences(False, False)[-1]
     assert without >= 0.65          # (the premise: the pooled test alone sees nothing)
     assert with_front <= without - 0.05
+    assert max(confidences(False, True)) < LugreTROptions().keep_valid_confidence
 
 
 def test_a_brake_gain_the_body_equation_leaves_in_doubt_is_no_valid():

@@ -75,7 +75,9 @@ class RoadChangeTest:
         wet asphalt's peak slip deeper into a dry road's rising branch, and μ falling as the slip
         grows reads as a peak passed (dev 20614: VALID 34 % low). Their data show no peak till then.
         The residuals do not tell a change met by the front axle from one both axles have met or
-        from a fit that strayed (the first fits of a stop): each is read as the first.
+        from a fit that strayed (the first fits of a stop): each is read as the first. A change
+        detected while the rear wheels wait is the rear axle meeting it (the front one's a
+        wheelbase later): the samples kept are past it, and the wait ends.
         """
         o = self.options
         if score > o.jump_threshold * 2.0 and now_s - self._last_jump_s > o.jump_refractory_s:
@@ -83,8 +85,12 @@ class RoadChangeTest:
             self._radius = None  # let the parameters move freely again
             self._jumps += 1
             self._last_jump_s = now_s
-            rear_crossing_s = self.vehicle.wheelbase / max(speed, 1.0)
-            self._rear_straddles_until_s = now_s + rear_crossing_s + o.excitation_window_s
+            if now_s <= self._rear_straddles_until_s:
+                # The rear axle meeting the change the front one met: the samples kept are past it.
+                self._rear_straddles_until_s = -math.inf
+            else:
+                rear_crossing_s = self.vehicle.wheelbase / max(speed, 1.0)
+                self._rear_straddles_until_s = now_s + rear_crossing_s + o.excitation_window_s
             self._jump_times.append(now_s)
             # What was valid described the old road: nothing may be held VALID from it.
             self._last_valid = None

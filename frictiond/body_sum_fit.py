@@ -229,6 +229,10 @@ class BodySumFit:
         together as the wheels' fit holds them (`side_coupling_std`), the bounds a clamp."""
         prior_weight = self.options.measurement_std / self._prior_std
         coupling_weight = self.options.measurement_std / self._side_coupling_std
+        # (the prior's and the coupling's part of the normal matrix: the same at every step)
+        prior_normal = prior_weight ** 2 * np.eye(2)
+        coupling_normal = coupling_weight ** 2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+        apart = np.array([1.0, -1.0])
         v = speed[:, None]
         x = np.array(x, dtype=float)
         for _ in range(MAX_STEPS):
@@ -236,8 +240,8 @@ class BodySumFit:
             residual = model - body
             prior = prior_weight * (x - self._prior_log_theta)
             coupling = coupling_weight * (x[0] - x[1])
-            normal = jac.T @ jac + prior_weight ** 2 * np.eye(2) + coupling_weight ** 2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-            gradient = jac.T @ residual + prior_weight * prior + coupling_weight * coupling * np.array([1.0, -1.0])
+            normal = jac.T @ jac + prior_normal + coupling_normal
+            gradient = jac.T @ residual + prior_weight * prior + coupling_weight * coupling * apart
             step = np.clip(-np.linalg.solve(normal, gradient), -MAX_LOG_STEP, MAX_LOG_STEP)
             x_new = np.clip(x + step, *self._log_bounds)
             done = float(np.abs(x_new - x).max()) < STEP_TOLERANCE

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .runaway import RunawayEvidence
-from .samples import N_WHEELS
+from .samples import N_WHEELS, REAR_WHEELS
 from .tyre_model import MAX_MODEL_SLIP, braking_mu_and_partials_few
 
 # A wheel verdict's proximity when the wheel's data contradict the fitted curve (`_wheel_verdict`).
@@ -231,7 +231,7 @@ class PeakEvidence(RunawayEvidence):
             # stop 381 braked 0.15 s after start-up, the offset unlearnt: the dry side's slips
             # held at 0.11 "showed" it at 3.7 m/s, and 103 VALID outputs were 27 % low).
             return "too slow to show a peak", 0.0, True
-        if wheel >= 2 and self._rear_axle_crossing():
+        if wheel in REAR_WHEELS and self._rear_axle_crossing():
             return REAR_CROSSING, 0.0, True
         if not peak_seen and not abs_working and not self._running_away(wheel, runaway_rate, lam_hi, mu_hi, speed):
             return "slip not running away", 0.0, True

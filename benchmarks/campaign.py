@@ -3,10 +3,10 @@
     .venv/bin/python benchmarks/campaign.py [--stops 1000] [--set held-out|dev|both] [--workers N]
         [--chunk 8] [--family ABS[/TYRE[/MANOEUVRE]]] [--clean-sensors] [--pre-roll S] [--grade G]
         [--payload KG] [--accel-offset A] [--cruise-lift S] [--tyre-model tmeasy] [--rear-select-low]
-        [--save FILE.json|.parquet] [--worst 15]
+        [--tyre-radii P] [--save FILE.json|.parquet] [--worst 15]
     .venv/bin/python benchmarks/campaign.py --reproduce SEED [--family F] [--clean-sensors] [--pre-roll S]
         [--grade G] [--payload KG] [--accel-offset A] [--cruise-lift S] [--tyre-model tmeasy] [--rear-select-low]
-        [--write-log DIR]
+        [--tyre-radii P] [--write-log DIR]
 
 Each stop is drawn from its seed (`frictiond.campaign.draw`, ranges in its docstring): a car,
 tyres (Burckhardt or Magic Formula, never the estimator's LuGre), an ABS family, sensors and a
@@ -30,7 +30,11 @@ brakes, where the draw has it coast: the engine's push then reads like an accele
 what coasting teaches (`frontend.coasting_offset`). `--tyre-model tmeasy` replaces every road's
 tyre by Rill's TMeasy curve of the same peak μ, its shape drawn from the seed: a tyre none of the
 estimator's development saw. `--rear-select-low` has every ABS regulate the rear axle
-select-low, as most production systems do: one pressure for both rear wheels.
+select-low, as most production systems do: one pressure for both rear wheels. `--tyre-radii P`
+gives every wheel a true rolling radius off the configured one by a share drawn within ±P, each
+wheel its own (worn, soft or mixed tyres; drawn: none off): the ECU turns ω into a speed over the
+configured radius, so every wheel's speed is off by its tyre's share (`frontend`'s
+`rolling_radius`).
 Printed: the issue's targets with PASS/FAIL per estimator, the comparison, a table per family,
 distributions, and the worst stops each with the command that reproduces it.
 """
@@ -105,6 +109,9 @@ def main(argv: list[str] | None = None) -> int:
                         "(tmeasy: Rill's TMeasy, a shape the estimator was never developed on)")
     parser.add_argument("--rear-select-low", action="store_true", help="every ABS regulates the rear axle "
                         "select-low: one pressure for both rear wheels, the command of the wheel asking for less")
+    parser.add_argument("--tyre-radii", type=float, default=None, metavar="P", help="every wheel's true rolling "
+                        "radius off the configured one by a share drawn within ±P, each wheel its own "
+                        "(worn, soft or mixed tyres; default: none off)")
     parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
     parser.add_argument("--worst", type=int, default=15)
     parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
@@ -113,11 +120,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         stress = Stress(args.clean_sensors, args.pre_roll, args.grade, args.payload, args.accel_offset,
-                        args.cruise_lift, args.tyre_model, args.rear_select_low)
+                        args.cruise_lift, args.tyre_model, args.rear_select_low, args.tyre_radii)
     except ValueError as exc:
         parser.error(str(exc).replace("pre_roll_s", "--pre-roll").replace("payload_kg", "--payload")
                      .replace("accel_offset_mps2", "--accel-offset").replace("grade", "--grade")
-                     .replace("cruise_lift_s", "--cruise-lift"))
+                     .replace("cruise_lift_s", "--cruise-lift").replace("tyre_radii", "--tyre-radii"))
     if args.reproduce is not None:
         return reproduce(args.reproduce, args.family, args.write_log, stress)
     sets = ("dev", "held-out") if args.which == "both" else (args.which,)

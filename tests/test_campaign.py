@@ -629,3 +629,26 @@ def test_a_select_low_rear_axle_brakes_both_rear_wheels_with_one_pressure():
     stress = Stress(rear_select_low=True)
     assert " --rear-select-low " in reproduce_command({"seed": 3}, None, stress) + " "
     assert stress.describe() == ", the rear axle's ABS select-low"
+
+
+def test_tyres_of_other_radii_turn_at_their_own_radius():
+    # `--tyre-radii P`: each wheel's true rolling radius off the configured one within ±P. Rolling
+    # free, a wheel turns at its ground speed over its own radius (less the rolling resistance's
+    # slip, 0.04 %), so the speed the ECU sends (over the configured radius) is off by the tyre's
+    # share (0.4-2.5 % here), and its truth slip stays that small.
+    drawn, stressed = draw_stop(3), draw_stop(3, tyre_radii=0.03)
+    assert drawn.car.radius_factors == (1.0,) * 4
+    factors = stressed.car.radius_factors
+    assert all(abs(f - 1.0) <= 0.03 for f in factors) and len(set(factors)) == 4
+    assert dataclasses.replace(stressed, car=dataclasses.replace(stressed.car, radius_factors=(1.0,) * 4)) == drawn
+    truth = simulate_stop(stressed).truth
+    rolling = [r for r in truth if r["time_s"] < 0.5]
+    for i, w in enumerate(("fl", "fr", "rl", "rr")):
+        radius = stressed.car.wheel_radius_m * factors[i]
+        assert all(abs(r[f"slip_{w}"]) < 1e-3 for r in rolling)
+        assert all(r[f"wheel_speed_{w}"] * radius == pytest.approx(r[f"ground_speed_{w}"], rel=1e-3) for r in rolling)
+    with pytest.raises(ValueError, match="tyre_radii"):
+        draw_stop(3, tyre_radii=0.2)
+    stress = Stress(tyre_radii=0.03)
+    assert " --tyre-radii 0.03 " in reproduce_command({"seed": 3}, None, stress) + " "
+    assert stress.describe() == ", tyre radii within ±0.03 of the configured"

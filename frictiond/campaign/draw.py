@@ -95,6 +95,8 @@ MAX_PAYLOAD_SET_KG = 2000.0  # what a stress run may put aboard (`Stress.payload
 MAX_ACCEL_OFFSET_SET = 2.0   # ... and the accelerometer's offset it may set (`Stress.accel_offset_mps2`)
 STRESS_TYRE_MODELS = ("tmeasy",)   # the truth tyres a stress run may put in place of the draw's
 TMEASY_STREAM = 0x7E           # (the TMeasy shapes' random stream, apart from the draw's six)
+RADII_STREAM = 0x7F            # (the tyre radii's, `Stress.tyre_radii`)
+MAX_TYRE_RADII_SET = 0.08      # how far off a stress run may draw a tyre's radius (a space-saver spare)
 
 
 @dataclass(frozen=True)
@@ -322,7 +324,9 @@ class Stress:
     where the draw has it coast (`StopSpec.driven_until_s`). `tyre_model`: "tmeasy", every road's
     tyre replaced by a TMeasy curve of the same peak μ (`tyres.tmeasy_like`, its shape drawn from
     the seed), a shape the estimator was never developed on. `rear_select_low`: the ABS regulates
-    the rear axle select-low (`abs_control`), one pressure for both rear wheels."""
+    the rear axle select-low (`abs_control`), one pressure for both rear wheels. `tyre_radii`: every
+    wheel's true rolling radius off the configured one by a share drawn within ± this, each wheel
+    its own (worn, soft or mixed tyres; drawn: none off)."""
 
     clean_sensors: bool = False
     pre_roll_s: float | None = None
@@ -332,6 +336,7 @@ class Stress:
     cruise_lift_s: float | None = None
     tyre_model: str | None = None
     rear_select_low: bool = False
+    tyre_radii: float | None = None
 
     def __post_init__(self) -> None:
         if self.pre_roll_s is not None and not self.pre_roll_s >= 0.0:
@@ -345,6 +350,8 @@ class Stress:
                              f"not {self.accel_offset_mps2}")
         if self.cruise_lift_s is not None and not self.cruise_lift_s >= 0.0:
             raise ValueError(f"cruise_lift_s must be ≥ 0, not {self.cruise_lift_s}")
+        if self.tyre_radii is not None and not 0.0 <= self.tyre_radii <= MAX_TYRE_RADII_SET:
+            raise ValueError(f"tyre_radii must be within 0…{MAX_TYRE_RADII_SET:g}, not {self.tyre_radii}")
         if self.tyre_model not in (None,) + STRESS_TYRE_MODELS:
             raise ValueError(f"tyre_model must be one of {', '.join(STRESS_TYRE_MODELS)}, not {self.tyre_model!r}")
 
@@ -366,6 +373,9 @@ class Stress:
             spec = replace(spec, tyre_family="tmeasy", surfaces=tuple(tmeasy_like(c, shapes) for c in spec.surfaces))
         if self.rear_select_low:
             spec = replace(spec, abs_params={**spec.abs_params, "rear_select_low": 1.0})
+        if self.tyre_radii is not None:
+            off = np.random.default_rng([spec.seed, RADII_STREAM]).uniform(-self.tyre_radii, self.tyre_radii, 4)
+            spec = replace(spec, car=replace(spec.car, radius_factors=tuple(float(1.0 + x) for x in off)))
         return spec
 
     def flags(self) -> str:
@@ -377,7 +387,8 @@ class Stress:
                         f" --accel-offset {self.accel_offset_mps2:g}" if self.accel_offset_mps2 is not None else "",
                         f" --cruise-lift {self.cruise_lift_s:g}" if self.cruise_lift_s is not None else "",
                         f" --tyre-model {self.tyre_model}" if self.tyre_model is not None else "",
-                        " --rear-select-low" if self.rear_select_low else ""])
+                        " --rear-select-low" if self.rear_select_low else "",
+                        f" --tyre-radii {self.tyre_radii:g}" if self.tyre_radii is not None else ""])
 
     def describe(self) -> str:
         """These settings for a report's title (", clean sensors, on a grade of 0.04", or "")."""
@@ -390,7 +401,9 @@ class Stress:
                         f", driven until {self.cruise_lift_s:g} s before the brakes"
                         if self.cruise_lift_s is not None else "",
                         f", every tyre a {self.tyre_model} curve" if self.tyre_model is not None else "",
-                        ", the rear axle's ABS select-low" if self.rear_select_low else ""])
+                        ", the rear axle's ABS select-low" if self.rear_select_low else "",
+                        f", tyre radii within ±{self.tyre_radii:g} of the configured"
+                        if self.tyre_radii is not None else ""])
 
 
 def draw_stop(seed: int, family: str | None = None, stress: Stress | None = None, **settings: Any) -> StopSpec:

@@ -126,7 +126,8 @@ class _Integrator:
         self.abs_every = max(1, int(round(spec.abs_cycle_s / spec.dt_s)))
         self.v = spec.speed0_mps
         self.x = 0.0
-        self.omega = [self.v / car.wheel_radius_m] * 4
+        self.radii = car.radii()
+        self.omega = [self.v / r for r in self.radii]
         self.force = [0.0] * 4
         self.pressure = [0.0] * 4
         self.driver = 0.0
@@ -204,11 +205,12 @@ class _Integrator:
         Combined slip by the friction ellipse: a tyre using the share u of its lateral grip has
         √(1 − u²) of its longitudinal curve left, at every slip."""
         car, dt = self.car, self.dt
-        r, j = car.wheel_radius_m, car.wheel_inertia_kgm2
+        j = car.wheel_inertia_kgm2
         gains = car.gains()
         relax = self.spec.relaxation_m
         omega_dot = [0.0] * 4
         for i in range(4):
+            r = self.radii[i]
             g, w = ground[i], self.omega[i]
             den = max(g, r * w, V_EPS_MPS)
             lam = (g - r * w) / den
@@ -269,13 +271,13 @@ class _Integrator:
 
     # -- the run ----------------------------------------------------------------------------------
     def run(self) -> Trace:
-        spec, dt, r = self.spec, self.dt, self.car.wheel_radius_m
+        spec, dt = self.spec, self.dt
         n_max = int((spec.pre_roll_s + spec.max_brake_s + AFTER_RELEASE_S + 0.5) / dt)
         for k in range(n_max):
             t = k * dt
             ground, ay, yaw = self.ground_speeds()
             surfaces = [self.surface_of(i) for i in range(4)]
-            slip = [_slip(g, r * w) for g, w in zip(ground, self.omega)]
+            slip = [_slip(g, r * w) for g, w, r in zip(ground, self.omega, self.radii)]
             self.step_driver(t)
             self.step_hydraulics(k, t, ground, slip, [self.peaks[s][1] for s in surfaces])
             fz = normal_loads(self.car, self.ax_lagged, ay, self.gravity_normal)

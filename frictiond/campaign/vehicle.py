@@ -33,6 +33,9 @@ class CarSpec:
     pushout_bar: float
     drag_area_coefficient: float     # ½ ρ C_d A [kg/m]
     pitch_lag_s: float
+    # Each wheel's true rolling radius over the configured one (FL, FR, RL, RR): worn or soft
+    # tyres (the stress run `Stress.tyre_radii`; drawn: all 1).
+    radius_factors: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
 
     @property
     def wheelbase_m(self) -> float:
@@ -41,6 +44,10 @@ class CarSpec:
     @property
     def true_mass_kg(self) -> float:
         return self.mass_kg + self.payload_kg
+
+    def radii(self) -> list[float]:
+        """Each wheel's true rolling radius [m] (FL, FR, RL, RR)."""
+        return [self.wheel_radius_m * f for f in self.radius_factors]
 
     def gains(self) -> tuple[float, float, float, float]:
         kf, kr = self.brake_gain_front, self.brake_gain_rear

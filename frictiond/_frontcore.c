@@ -517,7 +517,7 @@ static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_samp
     *A_gain_w, *A_sensed_needed, *A_sensed_needed_time, *A_sensor_offset, *A_sensor_offset_doubt,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_gain_doubt, *A_model_holds, *A_released,
     *A_unjudged, *A_lag_state, *A_slipping_time, *A_faster_since, *A_restarted_braking, *A_rolling_offset,
-    *A_rolling_samples, *A_rolling_m2, *A_rolling_air;
+    *A_rolling_samples, *A_rolling_m2, *A_rolling_air, *A_free_rolling;
 
 typedef struct {
     long repeats[NW];
@@ -532,6 +532,7 @@ typedef struct {
     double gain_tt, gain_tn, gain_t, gain_n, gain_w, sensor_offset, sensor_offset_doubt, recent_lag, last_brake, recent_weight, recent_needed, recent_brake, gain_factor, gain_doubt;
     double unjudged;
     int model_holds, released;
+    int free_rolling;   /* (written only: whether this sample rolled free, `_free_rolling_sample`) */
     double lag[LAG_N];
 } FEState;
 
@@ -591,6 +592,7 @@ static PyObject *list_attr(PyObject *obj, PyObject *name)
 
 static int load_state(PyObject *fe, FEState *s)
 {
+    s->free_rolling = 0;
     PyObject *repeats = NULL, *dead = NULL, *since = NULL, *unbraked = NULL;
     int rc = -1;
     if (!(repeats = list_attr(fe, A_repeats)) || !(dead = list_attr(fe, A_dead)) || !(since = list_attr(fe, A_low_since))
@@ -705,6 +707,7 @@ static int store_state(PyObject *fe, const FEState *s)
         || set_attr_new(fe, A_rolling_m2, PyFloat_FromDouble(s->rolling_m2)) < 0
         || set_attr_new(fe, A_rolling_air, PyFloat_FromDouble(s->rolling_air)) < 0
         || set_attr_new(fe, A_slipping_time, PyFloat_FromDouble(s->slipping_time)) < 0
+        || set_attr_new(fe, A_free_rolling, PyBool_FromLong(s->free_rolling)) < 0
         || set_attr_new(fe, A_unexplained, PyFloat_FromDouble(s->unexplained)) < 0
         || set_attr_new(fe, A_speed_time, float_or_none(s->has_speed_time, s->speed_time)) < 0
         || set_attr_new(fe, A_speed_est, float_or_none(s->has_speed_est, s->speed_est)) < 0
@@ -1271,6 +1274,7 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     int free_rolling = !braking && !driving && fastest - slowest <= FREE_ROLLING_SPREAD * fastest + 0.3;
     for (int i = 0; free_rolling && i < NW; i++)
         free_rolling = fabs(radius * omega_dot[i] - accel_long) < FREE_ROLLING_ACCEL;
+    s.free_rolling = free_rolling;
     int from_ref;
     const double speed = update_speed(&s, k, t_c, wl, accel_long, !free_rolling, has_ref, ref, ref_fresh, &from_ref);
     if (free_rolling && t_c - s.slipping_time >= k[K_BIAS_SETTLE]) {
@@ -1421,7 +1425,7 @@ static int intern_attributes(void)
         {&A_released, "_brake_released"}, {&A_gain_factor, "_brake_gain_factor"}, {&A_gain_doubt, "_brake_gain_doubt"},
         {&A_model_holds, "_brake_model_holds"}, {&A_unjudged, "_unjudged_s"}, {&A_lag_state, "_lag_state"},
         {&A_slipping_time, "_slipping_time_s"}, {&A_faster_since, "_wheels_faster_since_s"},
-        {&A_restarted_braking, "_speed_restarted_braking"},
+        {&A_restarted_braking, "_speed_restarted_braking"}, {&A_free_rolling, "_free_rolling_sample"},
     };
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if (!(*names[i].slot = PyUnicode_InternFromString(names[i].name)))

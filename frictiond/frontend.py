@@ -6,7 +6,8 @@ Per wheel-speed (trigger) frame the front end
    (a Savitzky–Golay filter that uses the real timestamps, so jitter and dropped frames do not
    bias the derivative); the derivative is taken at the centre of the window, so every other
    signal is evaluated at that same, delayed instant and all carry the same delay
-   (`wheel_speed_filter`);
+   (`wheel_speed_filter`), each wheel's speed over its own tyre's rolling radius, learnt while
+   the car rolls free (`rolling_radius`);
 2. interpolates the other messages (accelerations, pressures, reference speed, drive torque),
    which arrive with their own phase, at that instant (`input_alignment`), each pressure less
    its sensor's zero point (`pressure_zeros`);
@@ -48,6 +49,7 @@ from .input_names import (ABS_FLAG_NAMES, DRIVE_TORQUE_NAMES, MASTER_PRESSURE_NA
 from .plausibility import InputGate
 from .pressure_noise import PressureNoise
 from .pressure_zeros import PressureZeros
+from .rolling_radius import RollingRadii
 from .sample_physics import PHYSICS_TYPES as _PHYSICS_TYPES  # noqa: F401 (tests hand it to the compiled physics)
 from .sample_physics import SamplePhysics
 from .samples import FrontEndResult, PhysicalSample
@@ -155,7 +157,7 @@ class FrontEndOptions:
 
 
 class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, DoubtfulInputs, InputAlignment,
-               PressureZeros, SensorFaults):
+               PressureZeros, RollingRadii, SensorFaults):
     """Turns decoded inputs into `PhysicalSample`s, one per trigger (wheel-speed) message."""
 
     def __init__(
@@ -258,6 +260,7 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
         self._reset_body_equation()
         self._sample_accel: float | None = None   # the newest sample's longitudinal acceleration input
         self._reset_pressure_zeros()
+        self._reset_rolling_radii()
         self._last_trigger_s = -math.inf
         self.skipped_triggers = 0
         self._ref_disagreements = 0
@@ -363,12 +366,15 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
             result = self._suspect_sample(stale)
         else:
             free_rolling_before = self._accel_bias_samples
+            self._free_rolling_sample = False
             result = self._compute_sample(stale)
             if result.sample is not None and result.sample.braking:
                 self._attach_slip_spread(result.sample)
                 self._learn_resistance_doubt(result.sample.speed_mps, sum(result.sample.tyre_force_n))
             elif result.sample is not None and self._accel_bias_samples > free_rolling_before:
                 self._learn_pressure_zeros()
+            if result.sample is not None:
+                self._learn_rolling_radii(result.sample, self._free_rolling_sample)
         if result.fault == "wheel speed glitch":
             self.gate.count_repair(result.fault)
         if result.sample is not None:

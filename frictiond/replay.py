@@ -56,6 +56,8 @@ class ReplaySummary:
     pressure_noise_note: str | None = None
     # What the body equation learnt (`BodyEquation.body_equation_note`), None without braking.
     body_equation_note: str | None = None
+    # The tyres' rolling radii learnt (`RollingRadii.rolling_radius_note`), None while alike.
+    rolling_radius_note: str | None = None
 
     @property
     def update_period_s(self) -> float:
@@ -106,6 +108,8 @@ class ReplaySummary:
             lines.append(f"pressure noise    {self.pressure_noise_note}")
         if self.body_equation_note:
             lines.append(f"body equation     {self.body_equation_note}")
+        if self.rolling_radius_note:
+            lines.append(f"tyre radii        {self.rolling_radius_note}")
         if self.relaxation_m > 0.0:
             lines.append(f"tyre lag          relaxation length {self.relaxation_m:.2f} m learnt from the μ–slip loops, "
                          "corrected before the fit")
@@ -166,6 +170,7 @@ def replay_frames(
         dict(pipeline.wheel_join.dropped_by) if pipeline.wheel_join is not None else {},
         dict(pipeline.measured_cycle_times),
         pipeline.front_end.pressure_noise_note(), pipeline.front_end.body_equation_note(),
+        pipeline.front_end.rolling_radius_note(),
     )
 
 

@@ -207,6 +207,7 @@ class SamplePhysics:
         free_rolling = (not torqued
                         and fastest - min(wheel_linear) <= FREE_ROLLING_SPREAD * fastest + 0.3
                         and all(abs(radius * a - accel_long) < FREE_ROLLING_ACCEL_MPS2 for a in omega_dot))
+        self._free_rolling_sample = free_rolling
         speed, from_ref = self._update_speed(t_c, wheel_linear, accel_long, not free_rolling)
         if free_rolling and t_c - self._slipping_time_s >= self.options.accel_bias_settle_s:
             self._learn_accel_bias(t_c, omega_dot, accel_long_raw)

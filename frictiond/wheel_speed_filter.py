@@ -83,7 +83,8 @@ class WheelSpeedFilter:
             self._speed_time_s = None
         self._last_trigger_s = time_s
         self._wheel_times.append(time_s)
-        self._wheel_speeds.append(speeds)  # type: ignore[arg-type]
+        # (each wheel's speed over its own rolling radius: `rolling_radius`)
+        self._wheel_speeds.append(self._scaled_wheel_speeds(speeds))
 
     def _fit_wheels(self) -> tuple[float, list[float], list[float], bool]:
         """`_fit_window`, and when it finds a glitch (`_glitch_value`), the sample repaired in the

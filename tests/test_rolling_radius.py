@@ -11,7 +11,7 @@ from frictiond.evaluation import evaluate
 from frictiond.input_names import PRESSURE_NAMES, WHEEL_SPEED_NAMES
 from frictiond.pipeline import Pipeline
 
-from .test_frontend import VEH, make
+from .test_frontend import VEH, _without_speed_reference
 
 # True rolling radius over the configured one: a worn front-left tyre, a soft rear-right one.
 RADII = (0.98, 1.0, 1.005, 1.02)
@@ -40,17 +40,9 @@ def _drive(fe, radii=RADII, accel_lat=0.0, free_s=1.5, braked_s=1.0, slip=0.08, 
     return samples
 
 
-def _no_reference(compiled: bool):
-    fe = make(messages={"WHEELS": WHEEL_SPEED_NAMES, "ACCEL": ("accel_long", "accel_lat", "yaw_rate"),
-                        "PRESS": PRESSURE_NAMES})
-    if not compiled:
-        fe.core = None
-    return fe
-
-
 @pytest.mark.parametrize("compiled", [True, False])
 def test_free_rolling_teaches_each_wheels_radius_and_the_braked_slips_agree(compiled):
-    fe = _no_reference(compiled)
+    fe = _without_speed_reference(compiled)
     samples = _drive(fe)
     braked = [s for s in samples if s.braking and s.time_s > 1.7]
     assert braked
@@ -72,7 +64,7 @@ def test_the_radii_are_learnt_while_a_pressure_sensors_offset_flickers_above_the
     # "braked" at some samples, and the tyres' differences read as 1-2 % slips: the
     # accelerometer's offset waits a second after each (`SETTLE_SLIP`). The radii do not wait
     # for that, and once they are learnt the slips are the tyres' no more.
-    fe = _no_reference(compiled)
+    fe = _without_speed_reference(compiled)
     _drive(fe, braked_s=0.0, rest_bar=VEH.brake_pushout_pressure + 2.4)
     mean = sum(RADII) / 4.0
     assert fe.rolling_radius_factors == pytest.approx([f / mean for f in RADII], abs=1e-3)
@@ -82,10 +74,10 @@ def test_the_radii_are_learnt_while_a_pressure_sensors_offset_flickers_above_the
 def test_turning_or_equal_tyres_teach_no_radius(compiled):
     # Turning at 3 m/s², the outer wheels' extra speed is the turn's (and the loads' shift), not
     # the tyres': nothing is learnt. Equal tyres going straight leave every factor at 1.
-    fe = _no_reference(compiled)
+    fe = _without_speed_reference(compiled)
     _drive(fe, accel_lat=3.0, braked_s=0.0)
     assert fe.rolling_radius_factors == (1.0, 1.0, 1.0, 1.0)
-    fe = _no_reference(compiled)
+    fe = _without_speed_reference(compiled)
     _drive(fe, radii=(1.0, 1.0, 1.0, 1.0), braked_s=0.0)
     assert fe.rolling_radius_factors == pytest.approx((1.0,) * 4, abs=1e-9)
     assert fe.rolling_radius_note() is None
@@ -114,7 +106,7 @@ def test_wheels_still_closing_a_stops_slip_teach_no_radius(compiled):
     # rear ones (1 % still open for 0.3 s), and the four roll free before they have. Read as
     # radii, that tail would make the front tyres 0.5 % larger; it is past within the wait
     # (`accel_bias_settle_s` after the four wheels' mean slip under the brakes last read real).
-    fe = _no_reference(compiled)
+    fe = _without_speed_reference(compiled)
     for k in range(350):
         t = k * 0.01
         braking = 0.5 <= t < 1.0

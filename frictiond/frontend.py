@@ -366,7 +366,6 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
             result = self._suspect_sample(stale)
         else:
             free_rolling_before = self._accel_bias_samples
-            self._free_rolling_sample = False
             result = self._compute_sample(stale)
             if result.sample is not None and result.sample.braking:
                 self._attach_slip_spread(result.sample)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 
 from .sample_physics import FREE_ROLLING_SPREAD
-from .samples import PhysicalSample
+from .samples import WHEELS, PhysicalSample
 
 # Below this the wheel speeds' quantisation (0.06 km/h is 0.4 % at 18 km/h) is as large as what
 # is learnt.
@@ -54,7 +54,7 @@ class RollingRadii:
     @property
     def rolling_radius_factors(self) -> tuple[float, float, float, float]:
         """Each wheel's rolling radius over the configured one's share of the four's mean
-        (fl, fr, rl, rr; 1.0 until learnt): its ω is scaled by this where it is
+        (`WHEELS`' order; 1.0 until learnt): its ω is scaled by this where it is
         `RADIUS_RESOLUTION` or more off 1."""
         f = self._radius_factors
         return (f[0], f[1], f[2], f[3])
@@ -65,7 +65,7 @@ class RollingRadii:
         f = self._radius_factors
         if not self._radius_samples or all(abs(x - 1.0) < RADIUS_NOTE_SHARE for x in f):
             return None
-        wheels = ", ".join(f"{w} {100.0 * (x - 1.0):+.1f} %" for w, x in zip(("fl", "fr", "rl", "rr"), f))
+        wheels = ", ".join(f"{w} {100.0 * (x - 1.0):+.1f} %" for w, x in zip(WHEELS, f))
         return (f"{wheels} of the four's mean, learnt over {self._radius_samples} free-rolling samples; "
                 "each wheel's speed corrected by it")
 
@@ -113,8 +113,6 @@ class RollingRadii:
         norm = sum(factors) / 4.0
         low, high = 1.0 - FREE_ROLLING_SPREAD, 1.0 + FREE_ROLLING_SPREAD
         factors = [min(max(f / norm, low), high) for f in factors]
-        if not all(math.isfinite(f) for f in factors):
-            return
         self._radius_factors = factors
         applied = [f if abs(f - 1.0) >= RADIUS_RESOLUTION else 1.0 for f in factors]
         ratio = [a / b for a, b in zip(applied, self._radius_applied)]

@@ -51,7 +51,7 @@ def test_free_rolling_teaches_each_wheels_radius_and_the_braked_slips_agree(comp
         assert max(s.slip) - min(s.slip) < 3e-3
     mean = sum(RADII) / 4.0
     assert fe.rolling_radius_factors == pytest.approx([f / mean for f in RADII], abs=5e-4)
-    assert fe.rolling_radius_note().startswith("fl -2.1 %, fr -0.1 %, rl +0.4 %, rr +1.9 % of the four's mean")
+    assert fe.rolling_radius_note().startswith("FL -2.1 %, FR -0.1 %, RL +0.4 %, RR +1.9 % of the four's mean")
     # Braking teaches nothing: the factors are as free rolling left them.
     learnt = fe.rolling_radius_factors
     _drive(fe, free_s=0.0, braked_s=0.5)

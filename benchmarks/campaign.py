@@ -112,6 +112,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tyre-radii", type=float, default=None, metavar="P", help="every wheel's true rolling "
                         "radius off the configured one by a share drawn within ±P, each wheel its own "
                         "(worn, soft or mixed tyres; default: none off)")
+    parser.add_argument("--radius-scale", type=float, default=None, metavar="P", help="all four wheels' true "
+                        "rolling radius off the configured one by one share drawn within ±P (a radius taken "
+                        "from the tyre's size, not measured rolling; default: none off)")
     parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
     parser.add_argument("--worst", type=int, default=15)
     parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
@@ -120,11 +123,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         stress = Stress(args.clean_sensors, args.pre_roll, args.grade, args.payload, args.accel_offset,
-                        args.cruise_lift, args.tyre_model, args.rear_select_low, args.tyre_radii)
+                        args.cruise_lift, args.tyre_model, args.rear_select_low, args.tyre_radii,
+                        args.radius_scale)
     except ValueError as exc:
         parser.error(str(exc).replace("pre_roll_s", "--pre-roll").replace("payload_kg", "--payload")
                      .replace("accel_offset_mps2", "--accel-offset").replace("grade", "--grade")
-                     .replace("cruise_lift_s", "--cruise-lift").replace("tyre_radii", "--tyre-radii"))
+                     .replace("cruise_lift_s", "--cruise-lift").replace("tyre_radii", "--tyre-radii")
+                     .replace("radius_scale", "--radius-scale"))
     if args.reproduce is not None:
         return reproduce(args.reproduce, args.family, args.write_log, stress)
     sets = ("dev", "held-out") if args.which == "both" else (args.which,)

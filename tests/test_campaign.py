@@ -652,3 +652,24 @@ def test_tyres_of_other_radii_turn_at_their_own_radius():
     stress = Stress(tyre_radii=0.03)
     assert " --tyre-radii 0.03 " in reproduce_command({"seed": 3}, None, stress) + " "
     assert stress.describe() == ", tyre radii within ±0.03 of the configured"
+
+
+def test_a_radius_wrong_on_all_four_tyres_scales_every_wheel_alike():
+    # `--radius-scale P`: one share within ±P on all four true radii (a radius taken from the
+    # tyre's size), on top of `--tyre-radii`'s own per wheel.
+    drawn, scaled = draw_stop(3), draw_stop(3, radius_scale=0.03)
+    common = scaled.car.radius_factors[0]
+    assert common != 1.0 and abs(common - 1.0) <= 0.03 and scaled.car.radius_factors == (common,) * 4
+    assert dataclasses.replace(scaled, car=dataclasses.replace(scaled.car, radius_factors=(1.0,) * 4)) == drawn
+    both = draw_stop(3, tyre_radii=0.03, radius_scale=0.03).car.radius_factors
+    assert both == pytest.approx([f * common for f in draw_stop(3, tyre_radii=0.03).car.radius_factors], rel=1e-12)
+    truth = simulate_stop(scaled).truth
+    rolling = [r for r in truth if r["time_s"] < 0.5]
+    radius = scaled.car.wheel_radius_m * common
+    assert all(abs(r["slip_fl"]) < 1e-3 for r in rolling)
+    assert all(r["wheel_speed_fl"] * radius == pytest.approx(r["ground_speed_fl"], rel=1e-3) for r in rolling)
+    with pytest.raises(ValueError, match="radius_scale"):
+        draw_stop(3, radius_scale=0.2)
+    stress = Stress(radius_scale=0.03)
+    assert " --radius-scale 0.03 " in reproduce_command({"seed": 3}, None, stress) + " "
+    assert stress.describe() == ", all four radii within ±0.03 of the configured together"

@@ -96,6 +96,8 @@ MAX_ACCEL_OFFSET_SET = 2.0   # ... and the accelerometer's offset it may set (`S
 STRESS_TYRE_MODELS = ("tmeasy",)   # the truth tyres a stress run may put in place of the draw's
 TMEASY_STREAM = 0x7E           # (the TMeasy shapes' random stream, apart from the draw's six)
 RADII_STREAM = 0x7F            # (the tyre radii's, `Stress.tyre_radii`)
+RADIUS_SCALE_STREAM = 0x80     # (the common radius error's, `Stress.radius_scale`)
+MAX_RADIUS_SCALE_SET = 0.05    # how far off a stress run may draw all four tyres' radius together
 MAX_TYRE_RADII_SET = 0.08      # how far off a stress run may draw a tyre's radius (a space-saver spare)
 
 
@@ -326,7 +328,9 @@ class Stress:
     the seed), a shape the estimator was never developed on. `rear_select_low`: the ABS regulates
     the rear axle select-low (`abs_control`), one pressure for both rear wheels. `tyre_radii`: every
     wheel's true rolling radius off the configured one by a share drawn within ± this, each wheel
-    its own (worn, soft or mixed tyres; drawn: none off)."""
+    its own (worn, soft or mixed tyres; drawn: none off). `radius_scale`: all four true radii off the
+    configured one by one share drawn within ± this (a radius configured from the tyre's size, not
+    as measured rolling; with `tyre_radii`, the two multiply)."""
 
     clean_sensors: bool = False
     pre_roll_s: float | None = None
@@ -337,6 +341,7 @@ class Stress:
     tyre_model: str | None = None
     rear_select_low: bool = False
     tyre_radii: float | None = None
+    radius_scale: float | None = None
 
     def __post_init__(self) -> None:
         if self.pre_roll_s is not None and not self.pre_roll_s >= 0.0:
@@ -352,6 +357,8 @@ class Stress:
             raise ValueError(f"cruise_lift_s must be ≥ 0, not {self.cruise_lift_s}")
         if self.tyre_radii is not None and not 0.0 <= self.tyre_radii <= MAX_TYRE_RADII_SET:
             raise ValueError(f"tyre_radii must be within 0…{MAX_TYRE_RADII_SET:g}, not {self.tyre_radii}")
+        if self.radius_scale is not None and not 0.0 <= self.radius_scale <= MAX_RADIUS_SCALE_SET:
+            raise ValueError(f"radius_scale must be within 0…{MAX_RADIUS_SCALE_SET:g}, not {self.radius_scale}")
         if self.tyre_model not in (None,) + STRESS_TYRE_MODELS:
             raise ValueError(f"tyre_model must be one of {', '.join(STRESS_TYRE_MODELS)}, not {self.tyre_model!r}")
 
@@ -376,6 +383,11 @@ class Stress:
         if self.tyre_radii is not None:
             off = np.random.default_rng([spec.seed, RADII_STREAM]).uniform(-self.tyre_radii, self.tyre_radii, 4)
             spec = replace(spec, car=replace(spec.car, radius_factors=tuple(float(1.0 + x) for x in off)))
+        if self.radius_scale is not None:
+            common = 1.0 + np.random.default_rng([spec.seed, RADIUS_SCALE_STREAM]).uniform(-self.radius_scale,
+                                                                                             self.radius_scale)
+            factors = tuple(float(f * common) for f in spec.car.radius_factors)
+            spec = replace(spec, car=replace(spec.car, radius_factors=factors))
         return spec
 
     def flags(self) -> str:
@@ -388,7 +400,8 @@ class Stress:
                         f" --cruise-lift {self.cruise_lift_s:g}" if self.cruise_lift_s is not None else "",
                         f" --tyre-model {self.tyre_model}" if self.tyre_model is not None else "",
                         " --rear-select-low" if self.rear_select_low else "",
-                        f" --tyre-radii {self.tyre_radii:g}" if self.tyre_radii is not None else ""])
+                        f" --tyre-radii {self.tyre_radii:g}" if self.tyre_radii is not None else "",
+                        f" --radius-scale {self.radius_scale:g}" if self.radius_scale is not None else ""])
 
     def describe(self) -> str:
         """These settings for a report's title (", clean sensors, on a grade of 0.04", or "")."""
@@ -403,7 +416,9 @@ class Stress:
                         f", every tyre a {self.tyre_model} curve" if self.tyre_model is not None else "",
                         ", the rear axle's ABS select-low" if self.rear_select_low else "",
                         f", tyre radii within ±{self.tyre_radii:g} of the configured"
-                        if self.tyre_radii is not None else ""])
+                        if self.tyre_radii is not None else "",
+                        f", all four radii within ±{self.radius_scale:g} of the configured together"
+                        if self.radius_scale is not None else ""])
 
 
 def draw_stop(seed: int, family: str | None = None, stress: Stress | None = None, **settings: Any) -> StopSpec:

@@ -5,7 +5,9 @@ brake torque is known (`PhysicalSample.wheel_torques_unknown`: one master-cylind
 ABS releasing wheels), no wheel's μ enters the window, and μ_max comes from the fit of the
 sides' θ to the body's force (`body_sum_fit`) instead. Its confidence is the probability of μ_max within
 `confidence_band` under a normal error of σ² = the fit's measured mismatch
-(`body_sum_mismatch`)² + its drift² + the accelerometer's and the drag's doubt²/3.
+(`body_sum_mismatch`)² + its drift² + the accelerometer's and the drag's doubt²/3 + the rise of its
+residuals towards deep slips² (`BodySumResult.rise_share`, counted `misfit_peak_ratio` times as the
+wheels' fit counts the data above its curve: the peak lies beyond the fit by about that much).
 """
 from __future__ import annotations
 
@@ -60,10 +62,11 @@ class BodySumReport:
         scale = max(mu_max, 0.05)
         drift = (max(m for _, m in history) - min(m for _, m in history)) / scale
         doubt = self._body_force_doubt / scale
-        spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0
+        rise = o.misfit_peak_ratio * max(fit.rise_share, 0.0)
+        spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0 + rise ** 2
         confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
         confidence *= input_quality.confidence_factor(self._input_share)
-        detail = {"body_sum": 1.0, "body_sum_rms": fit.rms_share, "body_sum_spanning": float(sum(fit.spans)),
+        detail = {"body_sum": 1.0, "body_sum_rms": fit.rms_share, "body_sum_rise": fit.rise_share, "body_sum_spanning": float(sum(fit.spans)),
                   "body_sum_rows": float(fit.rows)}
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence

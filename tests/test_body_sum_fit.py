@@ -13,6 +13,7 @@ from frictiond.tyre_model import LugreParams
 
 DRY = (1.2801, 23.99, 0.52)       # Burckhardt dry asphalt: peak 1.17 at slip 0.17
 SNOW = (0.1946, 94.129, 0.0646)   # snow: peak 0.19 at slip 0.06
+COBBLESTONE = (1.3713, 6.4565, 0.6691)   # dry cobblestone: peak 1.00 at slip 0.40
 RATE_HZ = 100
 LOADS = (4800.0, 4800.0, 3200.0, 3200.0)
 
@@ -123,6 +124,21 @@ def test_two_roads_under_the_sum_show_nothing():
     assert fitted(new_fit(max_side_ratio=10.0), rows([SNOW, DRY, SNOW, DRY], slips)).verdict == ""
 
 
+def test_a_force_still_rising_past_the_fitted_peak_shows_in_the_residuals():
+    """Cobblestone's force climbs to slip 0.4; an ABS cycling its wheels between 0.05 and 0.35
+    never reaches that. The fit's shape tops out near 0.28 and the sum lets its peak pass for
+    shown, 16 % under the road's, with the residuals rising towards the deep rows; over a peak
+    that was crossed they do not."""
+    peak, _ = burckhardt_peak(COBBLESTONE)
+    short = fitted(new_fit(), rows([COBBLESTONE] * 4, lambda t: cycling_slips(t, 1.0, low=0.05, high=0.35), speed=14.0))
+    assert short.verdict == "" and short.mu_max < 0.85 * peak
+    assert short.rise_share > 0.05
+    for curve in (DRY, SNOW):
+        crossed_peak, slip = burckhardt_peak(curve)
+        crossed = fitted(new_fit(), rows([curve] * 4, lambda t, s=slip: cycling_slips(t, s), noise=0.01 * crossed_peak))
+        assert crossed.verdict == "" and crossed.rise_share < 0.01
+
+
 def test_wheels_dwelling_past_the_peak_show_nothing():
     _, slip = burckhardt_peak(DRY)
     deep = fitted(new_fit(), rows([DRY] * 4, lambda t: cycling_slips(t, slip, low=0.5, high=6.0)))
@@ -192,6 +208,21 @@ def test_the_estimator_publishes_the_body_sum_where_no_wheel_torque_is_known():
     assert all(e.detail.get("body_sum") == 1.0 for e in valid)
     # The confidence says what such fits showed on the campaign: within 10 % four times in five.
     assert all(0.685 <= e.confidence <= 0.85 for e in valid)
+
+
+def test_residuals_rising_past_the_fitted_peak_keep_the_body_sum_from_valid():
+    """The cobblestone cycles above, at 20 m/s and slowing: counted in the confidence, the rise
+    keeps the fit's 0.83 (the road's peak is 1.00) from VALID; not counted, it was VALID
+    throughout with a confidence of 0.79."""
+    samples = body_samples(COBBLESTONE, lambda t: cycling_slips(t, 1.0, low=0.05, high=0.35))
+    estimator = LugreTrustRegionEstimator()
+    estimates = [estimator.update(s) for s in samples]
+    assert Status.VALID not in {e.status for e in estimates}
+    assert estimator.not_valid_reason == "confidence below the VALID threshold"
+    assert min(e.detail["body_sum_rise"] for e in estimates[-50:]) > 0.05
+    uncounted = LugreTrustRegionEstimator(LugreTROptions(misfit_peak_ratio=0.0))
+    valid = [e for e in map(uncounted.update, samples) if e.status == Status.VALID]
+    assert len(valid) > 100 and all(e.mu_max < 0.85 for e in valid)
 
 
 def test_the_body_sum_is_not_used_where_the_wheels_torques_are_known_or_it_is_off():

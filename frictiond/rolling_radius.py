@@ -10,9 +10,14 @@ the body, speeds within `FREE_ROLLING_SPREAD` of each other), straight and near 
 every wheel turns at its ground speed: what its slip reads beyond the four wheels' mean is its
 radius's difference. Each wheel's speed is scaled by the factor learnt, its mean over the
 samples (a plain mean, then forgetting over `RADIUS_AVERAGE_SAMPLES`), kept to ±`FREE_ROLLING_SPREAD`.
-The four factors keep a mean of 1: the car's speed, which the wheels' mean gives, is not
-changed. A factor within `RADIUS_RESOLUTION` of 1 is not applied: tyres alike, or whose radii the
-ECU already corrects, give factors within the noise of 1.
+The four factors keep a mean of 1: without a ground-speed sensor nothing tells the four
+wheels' common radius from the car's speed. With one, a radius wrong for all four alike (a
+nominal radius configured, not the one measured rolling) shows as a slip all four read rolling
+free, and every slip measured against that sensor under the brakes is off by it:
+`_radius_scale` learns it from those samples, and the four wheels' speeds are scaled by it too.
+A factor within `RADIUS_RESOLUTION` of 1 is not applied: tyres alike, or whose radii the ECU
+already corrects, give factors within the noise of 1 (the common one, within
+`RADIUS_SCALE_RESOLUTION`: what a driven axle's traction slip makes of it).
 """
 from __future__ import annotations
 
@@ -36,6 +41,13 @@ RADIUS_AVERAGE_SAMPLES = 500
 # A factor within this of 1 is not applied: below the wheel speeds' resolution (0.01–0.06 km/h at
 # 50 km/h), it would move every slip by noise, not take a tyre's difference off.
 RADIUS_RESOLUTION = 0.001
+# The four's common radius is applied from this far off 1: rolling "free" as the bus tells it (no
+# drive torque sent) a car may still be driven, and its driven axle's traction slip, 0.1-0.2 % at a
+# cruise, reads as a common radius of that size (the campaign's cars as drawn learnt 0.11 %).
+RADIUS_SCALE_RESOLUTION = 0.003
+# ... and once this many samples are averaged: one reading of a ground-speed sensor is off by its
+# noise, a few hundredths of a m/s or 0.1-0.3 % of the speed, as much as that floor.
+RADIUS_SCALE_MIN_SAMPLES = 20
 # A difference worth telling a user (replay's summary): below it, tyres and noise as usual.
 RADIUS_NOTE_SHARE = 0.005
 
@@ -48,6 +60,8 @@ class RollingRadii:
         self._radius_factors = [1.0, 1.0, 1.0, 1.0]
         self._radius_applied = [1.0, 1.0, 1.0, 1.0]   # (those beyond `RADIUS_RESOLUTION`)
         self._radius_samples = 0
+        self._radius_scale = 1.0              # the four's common radius over the configured (a reference's)
+        self._radius_scale_samples = 0
         self._radius_slipping_s = -math.inf   # the last braked sample whose four wheels slipped (mean)
         self._free_rolling_sample = False     # (whether the newest sample rolled free: `SamplePhysics`)
 
@@ -59,19 +73,35 @@ class RollingRadii:
         f = self._radius_factors
         return (f[0], f[1], f[2], f[3])
 
+    @property
+    def rolling_radius_scale(self) -> float:
+        """The four wheels' common rolling radius over the configured one, as the ground-speed
+        sensor shows it (1.0 without one, or until learnt); applied with each wheel's factor."""
+        return self._radius_scale
+
     def rolling_radius_note(self) -> str | None:
         """The tyres' radii as learnt, for a user checking a car (worn, soft or mixed tyres):
         None until learnt, or while every one is within `RADIUS_NOTE_SHARE` of the four's mean."""
         f = self._radius_factors
-        if not self._radius_samples or all(abs(x - 1.0) < RADIUS_NOTE_SHARE for x in f):
+        notes = []
+        if self._radius_samples and any(abs(x - 1.0) >= RADIUS_NOTE_SHARE for x in f):
+            wheels = ", ".join(f"{w} {100.0 * (x - 1.0):+.1f} %" for w, x in zip(WHEELS, f))
+            notes.append(f"{wheels} of the four's mean, learnt over {self._radius_samples} free-rolling samples")
+        if self._radius_scale_samples and abs(self._radius_scale - 1.0) >= RADIUS_NOTE_SHARE:
+            notes.append(f"the four {100.0 * (self._radius_scale - 1.0):+.1f} % of vehicle.wheel_radius against the "
+                         f"ground-speed sensor, over {self._radius_scale_samples} samples")
+        if not notes:
             return None
-        wheels = ", ".join(f"{w} {100.0 * (x - 1.0):+.1f} %" for w, x in zip(WHEELS, f))
-        return (f"{wheels} of the four's mean, learnt over {self._radius_samples} free-rolling samples; "
-                "each wheel's speed corrected by it")
+        return "; ".join(notes) + "; each wheel's speed corrected by it"
 
     def _scaled_wheel_speeds(self, speeds: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
         f = self._radius_applied
         return (speeds[0] * f[0], speeds[1] * f[1], speeds[2] * f[2], speeds[3] * f[3])
+
+    def _applied_scale(self) -> float:
+        if self._radius_scale_samples < RADIUS_SCALE_MIN_SAMPLES:
+            return 1.0
+        return self._radius_scale if abs(self._radius_scale - 1.0) >= RADIUS_SCALE_RESOLUTION else 1.0
 
     def _learn_rolling_radii(self, sample: PhysicalSample, free_rolling: bool) -> None:
         """Each sample fitted (not a suspect one): rolling free (`SamplePhysics`: no brake or
@@ -105,16 +135,25 @@ class RollingRadii:
             return
         self._radius_samples += 1
         weight = 1.0 / min(self._radius_samples, RADIUS_AVERAGE_SAMPLES)
-        # This sample's factor for each wheel: the one applied, and what its slip still reads
-        # beyond the mean (reading slow, slip > mean: a larger radius than configured, its speed
-        # scaled up). The factors learnt are these samples' mean.
-        shown = [a * (1.0 + e) for a, e in zip(self._radius_applied, excess)]
+        # This sample's factor for each wheel: the one applied (over the common scale), and what
+        # its slip still reads beyond the mean (reading slow, slip > mean: a larger radius than
+        # configured, its speed scaled up). The factors learnt are these samples' mean.
+        scale = self._applied_scale()
+        shown = [a / scale * (1.0 + e) for a, e in zip(self._radius_applied, excess)]
         factors = [f + weight * (x - f) for f, x in zip(self._radius_factors, shown)]
         norm = sum(factors) / 4.0
         low, high = 1.0 - FREE_ROLLING_SPREAD, 1.0 + FREE_ROLLING_SPREAD
         factors = [min(max(f / norm, low), high) for f in factors]
         self._radius_factors = factors
-        applied = [f if abs(f - 1.0) >= RADIUS_RESOLUTION else 1.0 for f in factors]
+        if sample.speed_from_reference:
+            # Against the ground's speed, the four's mean slip is their common radius's error.
+            self._radius_scale_samples += 1
+            common = scale * (1.0 + mean)
+            self._radius_scale += (common - self._radius_scale) / min(self._radius_scale_samples, RADIUS_AVERAGE_SAMPLES)
+            self._radius_scale = min(max(self._radius_scale, low), high)
+            scale = self._applied_scale()
+        applied = [f * scale for f in factors]
+        applied = [a if abs(a - 1.0) >= RADIUS_RESOLUTION else 1.0 for a in applied]
         ratio = [a / b for a, b in zip(applied, self._radius_applied)]
         if ratio == [1.0, 1.0, 1.0, 1.0]:
             return

@@ -11,7 +11,7 @@ from frictiond.evaluation import evaluate
 from frictiond.input_names import PRESSURE_NAMES, WHEEL_SPEED_NAMES
 from frictiond.pipeline import Pipeline
 
-from .test_frontend import VEH, _without_speed_reference
+from .test_frontend import VEH, _without_speed_reference, make
 
 # True rolling radius over the configured one: a worn front-left tyre, a soft rear-right one.
 RADII = (0.98, 1.0, 1.005, 1.02)
@@ -123,3 +123,49 @@ def test_wheels_still_closing_a_stops_slip_teach_no_radius(compiled):
             learnt_before = fe._radius_samples
     assert learnt_before > 20 and fe._radius_samples > learnt_before + 50
     assert fe.rolling_radius_factors == pytest.approx((1.0,) * 4, abs=1e-4)
+
+
+def _drive_with_reference(fe, scale, free_s=1.5, braked_s=1.0, slip=0.08, v0=20.0, decel=6.0):
+    """`_drive` on a car with a ground-speed sensor, every tyre's radius `scale` times the
+    configured one: (time, the four slips) of the braked samples."""
+    braked = []
+    for k in range(int((free_s + braked_s) / 0.01)):
+        t = k * 0.01
+        braking = t >= free_s
+        speed = v0 - 0.3 * min(t, free_s) - decel * max(t - free_s, 0.0)
+        s = slip if braking else 0.0
+        fe.push(t + 0.003, "ACCEL", {"accel_long": -decel if braking else -0.3, "accel_lat": 0.0, "yaw_rate": 0.0})
+        fe.push(t + 0.006, "PRESS", dict(zip(PRESSURE_NAMES, (60.0 if braking else 0.0,) * 4)))
+        fe.push(t + 0.008, "REF", {"vehicle_speed_ref": speed})
+        r = fe.push(t, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, [speed * (1.0 - s) / (VEH.wheel_radius * scale)] * 4)))
+        if braking and r is not None and r.sample is not None:
+            braked.append((t, r.sample.slip))
+    return braked
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_radius_wrong_on_all_four_is_learnt_against_the_ground_speed_sensor(compiled):
+    """Tyres 1.5 % larger than `vehicle.wheel_radius` on all four: against a ground-speed sensor
+    every slip reads 1.5 % high (0.095 for 0.08), rolling free too. Learnt there, the braked slips
+    are the tyres'; without a sensor the common radius is not learnt (nothing tells it)."""
+    fe = make()
+    if not compiled:
+        fe.core = None
+    braked = _drive_with_reference(fe, 1.015)
+    assert fe.rolling_radius_scale == pytest.approx(1.015, abs=1e-3)
+    assert fe.rolling_radius_factors == pytest.approx((1.0,) * 4, abs=1e-4)
+    # (as with tyres of the configured radius: the reference's 8 ms after the wheels add 0.2-0.3 %)
+    right = make()
+    if not compiled:
+        right.core = None
+    configured = _drive_with_reference(right, 1.0)
+    assert all(s == pytest.approx(c, abs=5e-4) for (t, slips), (_, ok) in zip(braked, configured) if t > 1.7
+               for s, c in zip(slips, ok))
+    assert "the four +1.5 % of vehicle.wheel_radius against the ground-speed sensor" in fe.rolling_radius_note()
+    unlearnt = make()
+    unlearnt._learn_rolling_radii = lambda sample, free_rolling: None
+    off = _drive_with_reference(unlearnt, 1.015)
+    assert all(s > c + 0.012 for (t, slips), (_, ok) in zip(off, configured) if t > 1.7 for s, c in zip(slips, ok))
+    without = _without_speed_reference(compiled)
+    _drive(without, radii=(1.015,) * 4)
+    assert without.rolling_radius_scale == 1.0 and without.rolling_radius_note() is None

@@ -17,8 +17,8 @@ the sides' peaks must agree within `max_side_ratio`, and so must the window's ol
 halves fitted apart (a change of road). Residuals above `max_rms_share` of μ_max mean the curves
 do not describe the wheels; residuals that grow with how deep the wheels are in slip
 (`BodySumResult.rise_share`) mean the tyre's force still rises where the fitted curve tops out, so
-its peak is beyond the fit's (the report counts that in its confidence); in a turn (`max_lateral_mu`) the tyres' lateral force takes grip the
-sum does not see. Pure numerics: nothing of CAN or of the front end.
+its peak is beyond the fit's (the report counts that in its confidence); in a turn
+(`max_lateral_mu`) the tyres' lateral force takes grip the sum does not see. Pure numerics: nothing of CAN or of the front end.
 """
 from __future__ import annotations
 

@@ -66,8 +66,8 @@ class BodySumReport:
         spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0 + rise ** 2
         confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
         confidence *= input_quality.confidence_factor(self._input_share)
-        detail = {"body_sum": 1.0, "body_sum_rms": fit.rms_share, "body_sum_rise": fit.rise_share, "body_sum_spanning": float(sum(fit.spans)),
-                  "body_sum_rows": float(fit.rows)}
+        detail = {"body_sum": 1.0, "body_sum_rms": fit.rms_share, "body_sum_rise": fit.rise_share,
+                  "body_sum_spanning": float(sum(fit.spans)), "body_sum_rows": float(fit.rows)}
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
         if fit.verdict:

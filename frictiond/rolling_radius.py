@@ -149,7 +149,8 @@ class RollingRadii:
             # Against the ground's speed, the four's mean slip is their common radius's error.
             self._radius_scale_samples += 1
             common = scale * (1.0 + mean)
-            self._radius_scale += (common - self._radius_scale) / min(self._radius_scale_samples, RADIUS_AVERAGE_SAMPLES)
+            weight = 1.0 / min(self._radius_scale_samples, RADIUS_AVERAGE_SAMPLES)
+            self._radius_scale += weight * (common - self._radius_scale)
             self._radius_scale = min(max(self._radius_scale, low), high)
             scale = self._applied_scale()
         applied = [f * scale for f in factors]

@@ -60,7 +60,7 @@ class RollingRadii:
         self._radius_factors = [1.0, 1.0, 1.0, 1.0]
         self._radius_applied = [1.0, 1.0, 1.0, 1.0]   # (those beyond `RADIUS_RESOLUTION`)
         self._radius_samples = 0
-        self._radius_scale = 1.0              # the four's common radius over the configured (a reference's)
+        self._radius_scale = 1.0              # the four's common radius over the configured (`rolling_radius_scale`)
         self._radius_scale_samples = 0
         self._radius_slipping_s = -math.inf   # the last braked sample whose four wheels slipped (mean)
         self._free_rolling_sample = False     # (whether the newest sample rolled free: `SamplePhysics`)
@@ -68,8 +68,8 @@ class RollingRadii:
     @property
     def rolling_radius_factors(self) -> tuple[float, float, float, float]:
         """Each wheel's rolling radius over the configured one's share of the four's mean
-        (`WHEELS`' order; 1.0 until learnt): its ω is scaled by this where it is
-        `RADIUS_RESOLUTION` or more off 1."""
+        (`WHEELS`' order; 1.0 until learnt): its ω is scaled by this (times the common
+        `rolling_radius_scale`) where that is `RADIUS_RESOLUTION` or more off 1."""
         f = self._radius_factors
         return (f[0], f[1], f[2], f[3])
 
@@ -80,8 +80,9 @@ class RollingRadii:
         return self._radius_scale
 
     def rolling_radius_note(self) -> str | None:
-        """The tyres' radii as learnt, for a user checking a car (worn, soft or mixed tyres):
-        None until learnt, or while every one is within `RADIUS_NOTE_SHARE` of the four's mean."""
+        """The tyres' radii as learnt, for a user checking a car (worn, soft or mixed tyres, a
+        nominal radius configured): None until learnt, or while every one is within
+        `RADIUS_NOTE_SHARE` of the four's mean and their common one within it of 1."""
         f = self._radius_factors
         notes = []
         if self._radius_samples and any(abs(x - 1.0) >= RADIUS_NOTE_SHARE for x in f):
@@ -104,31 +105,13 @@ class RollingRadii:
         return self._radius_scale if abs(self._radius_scale - 1.0) >= RADIUS_SCALE_RESOLUTION else 1.0
 
     def _learn_rolling_radii(self, sample: PhysicalSample, free_rolling: bool) -> None:
-        """Each sample fitted (not a suspect one): rolling free (`SamplePhysics`: no brake or
-        drive torque, the wheels following the body, their speeds within `FREE_ROLLING_SPREAD`),
-        each wheel's slip beyond the four's mean is its radius's difference still left.
-
-        Not the accelerometer's offset's free rolling: that waits `accel_bias_settle_s` after
-        any braked wheel slipped over `SETTLE_SLIP`, and a tyre 1 % smaller than the others
-        reads that much whenever a pressure sensor's offset makes its wheel "braked" at rest:
-        the radii would then never be learnt. Here the wait counts from a braked sample whose
-        four wheels' mean slip is beyond what the tyres' differences (and a speed estimate at
-        the fastest of them) can read, `FREE_ROLLING_SPREAD`: wheels still closing the slip of
-        a stop together cancel in the mean, and a tail they close at different rates is past
-        within the wait."""
-        t = sample.time_s
-        if t < self._radius_slipping_s:
-            self._radius_slipping_s = -math.inf     # (the clock went back)
-        if sample.braking and sum(sample.slip) / 4.0 > FREE_ROLLING_SPREAD:
-            self._radius_slipping_s = t
-        if not free_rolling or t - self._radius_slipping_s < self.options.accel_bias_settle_s:
+        """Each sample fitted (not a suspect one): on one that teaches the radii
+        (`_radius_teaching_slips`), each wheel's slip beyond the four's mean is its radius's
+        difference still left; against a ground-speed sensor, the four's mean slip is their
+        common radius's error (`_learn_radius_scale`)."""
+        slips = self._radius_teaching_slips(sample, free_rolling)
+        if slips is None:
             return
-        accel, lateral = self._sample_accel, self._value("accel_lat", t)
-        if (sample.speed_mps < RADIUS_MIN_SPEED_MPS or accel is None or lateral is None
-                or not abs(accel - self._sensor_offset_mps2) <= RADIUS_MAX_LONGITUDINAL_MPS2
-                or not abs(lateral) <= RADIUS_MAX_LATERAL_MPS2):
-            return
-        slips = sample.slip
         mean = sum(slips) / 4.0
         excess = [s - mean for s in slips]
         if not all(abs(e) <= FREE_ROLLING_SPREAD for e in excess):   # (NaN: not learnt)
@@ -146,20 +129,53 @@ class RollingRadii:
         factors = [min(max(f / norm, low), high) for f in factors]
         self._radius_factors = factors
         if sample.speed_from_reference:
-            # Against the ground's speed, the four's mean slip is their common radius's error.
-            self._radius_scale_samples += 1
-            common = scale * (1.0 + mean)
-            weight = 1.0 / min(self._radius_scale_samples, RADIUS_AVERAGE_SAMPLES)
-            self._radius_scale += weight * (common - self._radius_scale)
-            self._radius_scale = min(max(self._radius_scale, low), high)
-            scale = self._applied_scale()
+            scale = self._learn_radius_scale(scale * (1.0 + mean))
         applied = [f * scale for f in factors]
-        applied = [a if abs(a - 1.0) >= RADIUS_RESOLUTION else 1.0 for a in applied]
+        self._apply_radii([a if abs(a - 1.0) >= RADIUS_RESOLUTION else 1.0 for a in applied])
+
+    def _radius_teaching_slips(self, sample: PhysicalSample, free_rolling: bool) -> tuple[float, ...] | None:
+        """The sample's slips if it teaches the radii, else None: rolling free (`SamplePhysics`:
+        no brake or drive torque, the wheels following the body, their speeds within
+        `FREE_ROLLING_SPREAD`), straight, near a constant speed and fast enough.
+
+        Not the accelerometer's offset's free rolling: that waits `accel_bias_settle_s` after
+        any braked wheel slipped over `SETTLE_SLIP`, and a tyre 1 % smaller than the others
+        reads that much whenever a pressure sensor's offset makes its wheel "braked" at rest:
+        the radii would then never be learnt. Here the wait counts from a braked sample whose
+        four wheels' mean slip is beyond what the tyres' differences (and a speed estimate at
+        the fastest of them) can read, `FREE_ROLLING_SPREAD`: wheels still closing the slip of
+        a stop together cancel in the mean, and a tail they close at different rates is past
+        within the wait."""
+        t = sample.time_s
+        if t < self._radius_slipping_s:
+            self._radius_slipping_s = -math.inf     # (the clock went back)
+        if sample.braking and sum(sample.slip) / 4.0 > FREE_ROLLING_SPREAD:
+            self._radius_slipping_s = t
+        if not free_rolling or t - self._radius_slipping_s < self.options.accel_bias_settle_s:
+            return None
+        accel, lateral = self._sample_accel, self._value("accel_lat", t)
+        if (sample.speed_mps < RADIUS_MIN_SPEED_MPS or accel is None or lateral is None
+                or not abs(accel - self._sensor_offset_mps2) <= RADIUS_MAX_LONGITUDINAL_MPS2
+                or not abs(lateral) <= RADIUS_MAX_LATERAL_MPS2):
+            return None
+        return sample.slip
+
+    def _learn_radius_scale(self, shown: float) -> float:
+        """One sample's common radius (`shown`: the scale applied, times what the four's mean slip
+        against the ground-speed sensor still reads) into their mean; the scale to apply now."""
+        self._radius_scale_samples += 1
+        weight = 1.0 / min(self._radius_scale_samples, RADIUS_AVERAGE_SAMPLES)
+        scale = self._radius_scale + weight * (shown - self._radius_scale)
+        self._radius_scale = min(max(scale, 1.0 - FREE_ROLLING_SPREAD), 1.0 + FREE_ROLLING_SPREAD)
+        return self._applied_scale()
+
+    def _apply_radii(self, applied: list[float]) -> None:
+        """Scale the wheel speeds by `applied` from now on, and the derivative window's speeds,
+        scaled by the factors before, to match: no step in its fit."""
         ratio = [a / b for a, b in zip(applied, self._radius_applied)]
         if ratio == [1.0, 1.0, 1.0, 1.0]:
             return
         self._radius_applied = applied
-        # The window's speeds were scaled by the factors before: rescaled, no step in its fit.
         window = self._wheel_speeds
         for k in range(len(window)):
             s = window[k]

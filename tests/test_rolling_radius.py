@@ -18,10 +18,11 @@ RADII = (0.98, 1.0, 1.005, 1.02)
 
 
 def _drive(fe, radii=RADII, accel_lat=0.0, free_s=1.5, braked_s=1.0, slip=0.08, v0=20.0, decel=6.0,
-           rest_bar=0.0):
+           rest_bar=0.0, reference=False):
     """Rolls free for `free_s` (coasting at 0.3 m/s², the pressure sensors reading up to
     `rest_bar`, uniformly at random), then brakes with every tyre at `slip`: each wheel's ω is its ground
-    speed over its own radius. The samples, in order."""
+    speed over its own radius; with `reference`, a ground-speed sensor sends the car's speed 8 ms
+    after the wheels. The samples, in order."""
     samples = []
     rng = random.Random(5)
     for k in range(int((free_s + braked_s) / 0.01)):
@@ -33,6 +34,8 @@ def _drive(fe, radii=RADII, accel_lat=0.0, free_s=1.5, braked_s=1.0, slip=0.08, 
                                      "yaw_rate": accel_lat / speed})
         rest = rng.uniform(0.0, rest_bar)
         fe.push(t + 0.006, "PRESS", dict(zip(PRESSURE_NAMES, (60.0 if braking else rest,) * 4)))
+        if reference:
+            fe.push(t + 0.008, "REF", {"vehicle_speed_ref": speed})
         omegas = [speed * (1.0 - s) / (VEH.wheel_radius * f) for f in radii]
         r = fe.push(t, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, omegas)))
         if r is not None and r.sample is not None:
@@ -125,22 +128,10 @@ def test_wheels_still_closing_a_stops_slip_teach_no_radius(compiled):
     assert fe.rolling_radius_factors == pytest.approx((1.0,) * 4, abs=1e-4)
 
 
-def _drive_with_reference(fe, scale, free_s=1.5, braked_s=1.0, slip=0.08, v0=20.0, decel=6.0):
+def _braked_slips_with_reference(fe, scale):
     """`_drive` on a car with a ground-speed sensor, every tyre's radius `scale` times the
-    configured one: (time, the four slips) of the braked samples."""
-    braked = []
-    for k in range(int((free_s + braked_s) / 0.01)):
-        t = k * 0.01
-        braking = t >= free_s
-        speed = v0 - 0.3 * min(t, free_s) - decel * max(t - free_s, 0.0)
-        s = slip if braking else 0.0
-        fe.push(t + 0.003, "ACCEL", {"accel_long": -decel if braking else -0.3, "accel_lat": 0.0, "yaw_rate": 0.0})
-        fe.push(t + 0.006, "PRESS", dict(zip(PRESSURE_NAMES, (60.0 if braking else 0.0,) * 4)))
-        fe.push(t + 0.008, "REF", {"vehicle_speed_ref": speed})
-        r = fe.push(t, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, [speed * (1.0 - s) / (VEH.wheel_radius * scale)] * 4)))
-        if braking and r is not None and r.sample is not None:
-            braked.append((t, r.sample.slip))
-    return braked
+    configured one: the four slips of each braked sample after 1.7 s."""
+    return [s.slip for s in _drive(fe, radii=(scale,) * 4, reference=True) if s.braking and s.time_s > 1.7]
 
 
 @pytest.mark.parametrize("compiled", [True, False])
@@ -151,21 +142,21 @@ def test_a_radius_wrong_on_all_four_is_learnt_against_the_ground_speed_sensor(co
     fe = make()
     if not compiled:
         fe.core = None
-    braked = _drive_with_reference(fe, 1.015)
+    braked = _braked_slips_with_reference(fe, 1.015)
     assert fe.rolling_radius_scale == pytest.approx(1.015, abs=1e-3)
     assert fe.rolling_radius_factors == pytest.approx((1.0,) * 4, abs=1e-4)
     # (as with tyres of the configured radius: the reference's 8 ms after the wheels add 0.2-0.3 %)
     right = make()
     if not compiled:
         right.core = None
-    configured = _drive_with_reference(right, 1.0)
-    assert all(s == pytest.approx(c, abs=5e-4) for (t, slips), (_, ok) in zip(braked, configured) if t > 1.7
-               for s, c in zip(slips, ok))
+    configured = _braked_slips_with_reference(right, 1.0)
+    assert braked and len(braked) == len(configured)
+    assert all(s == pytest.approx(c, abs=5e-4) for slips, ok in zip(braked, configured) for s, c in zip(slips, ok))
     assert "the four +1.5 % of vehicle.wheel_radius against the ground-speed sensor" in fe.rolling_radius_note()
     unlearnt = make()
     unlearnt._learn_rolling_radii = lambda sample, free_rolling: None
-    off = _drive_with_reference(unlearnt, 1.015)
-    assert all(s > c + 0.012 for (t, slips), (_, ok) in zip(off, configured) if t > 1.7 for s, c in zip(slips, ok))
+    off = _braked_slips_with_reference(unlearnt, 1.015)
+    assert all(s > c + 0.012 for slips, ok in zip(off, configured) for s, c in zip(slips, ok))
     without = _without_speed_reference(compiled)
     _drive(without, radii=(1.015,) * 4)
     assert without.rolling_radius_scale == 1.0 and without.rolling_radius_note() is None

@@ -70,12 +70,13 @@ class BodySumOptions:
 
 @dataclass(frozen=True)
 class BodySumResult:
-    """One fit: μ_max and λ* at the speed given, θ, the residuals' rms over μ_max, how far the
-    residuals rise from the rows of shallow slips to the deep ones (over μ_max: `_rise`),
-    which wheels spanned the fitted peak, the window's largest lateral μ, the rows fitted, and why
-    it does not show the peak ("" when it does)."""
+    """One fit: μ_max and λ* at the speed given, each wheel's fitted peak slip, θ, the
+    residuals' rms over μ_max, how far the residuals rise from the rows of shallow slips to the
+    deep ones (over μ_max: `_rise`), which wheels spanned the fitted peak, the window's largest
+    lateral μ, the rows fitted, and why it does not show the peak ("" when it does)."""
     mu_max: float
     slip_star: float
+    wheel_slip_star: tuple[float, ...]
     theta: float
     rms_share: float
     rise_share: float
@@ -150,18 +151,34 @@ class BodySumFit:
         """Whether the newest `innovation_window_s` of rows stray from the last fit by more than
         `max_innovation_share` of its μ_max on average: a change of road, seen at once rather
         than when the window's halves disagree. Their noise averages over an ABS cycle's rows;
-        the fit's own misfit is within `max_rms_share`."""
+        the fit's own misfit is within `max_rms_share`.
+
+        Read only against a fit that shows the peak, and on the rows whose wheels all stay within
+        `max_slip_ratio` of their fitted peak slip, as the fit's: there the curve describes the
+        tyre. A wheel far past its peak gives its tyre's sliding level, up to 55 % under the peak
+        where the curve at the priors' shape falls 12 %; and a fit that does not show the peak
+        has its curve where the prior's shape puts it, not the tyre's. The newest 0.1 s is one
+        phase of an ABS cycle: with the wheels running towards lock, either read as a new road at
+        every cycle, and the window, started again each time, never filled (campaign stop 475,
+        a car sending its master cylinder's pressure alone). A change under a fit that shows no
+        peak still shows: the window's halves then differ (`MISFIT`) until the old road's rows
+        have left it."""
         o = self.options
         last = self._last
-        if last is None:   # (none yet, or a change just started the window again)
-            return False
+        if last is None or last.verdict:   # (none yet, a change just started the window again,
+            return False                   # or a curve that does not describe the rows)
+        deepest = o.max_slip_ratio * np.array(last.wheel_slip_star)
         newest = []
         for row in reversed(self._rows):
             if row[0] < self._rows[-1][0] - o.innovation_window_s:
                 break
             newest.append(row)
-        if len(newest) < 4:
+        described = [row for row in newest if (np.array(row[2]) <= deepest).all()]
+        # (a few described rows among deep ones are the cycle's turning points: re-applying
+        # tyres whose force lags their slip, not a road)
+        if len(described) < max(4, len(newest) / 2):
             return False
+        newest = described
         model, _ = self._sum_and_slope(np.array([r[2] for r in newest]), np.array([[r[1]] for r in newest]),
                                        np.array([r[3] for r in newest]), self._log_thetas)
         residual = float(np.mean(np.array([r[4] for r in newest]) - model))
@@ -206,7 +223,8 @@ class BodySumFit:
             verdict = MISFIT
         elif lateral_mu > o.max_lateral_mu:
             verdict = "turning"
-        return BodySumResult(mu_max, float(share @ wheel_slip), float(np.exp(x).mean()), rms_share, rise_share,
+        return BodySumResult(mu_max, float(share @ wheel_slip), tuple(wheel_slip.tolist()), float(np.exp(x).mean()),
+                             rms_share, rise_share,
                              tuple(spans.tolist()), lateral_mu, len(body), verdict)
 
     def _halves_differ(self, x: np.ndarray, times: np.ndarray, speed: np.ndarray, slips: np.ndarray,

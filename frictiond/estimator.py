@@ -484,6 +484,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._last_excited_s = -math.inf
         self._last_estimate: FrictionEstimate | None = None
         self._withdrawn_moving_s = -math.inf   # the last non-VALID update at a speed with evidence (`_hold`)
+        self._stop_fit: FrictionEstimate | None = None   # this stop's last fit (`_starved`)
+        self._last_braking_s = -math.inf
         self._fits = 0
         self._event_first_fit = self._spread_loss_fit = 0   # `_fits` at the event's start, at the last spread loss
         self._peak_spread_loss = 0.0
@@ -618,30 +620,68 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             if (self._fits - self._event_first_fit) % max(o.spread_loss_every, 1) == 0:
                 self._spread_loss_fit = self._fits
                 self._peak_spread_loss = self._spread_loss()
-        last = self._last_estimate
+        self._follow_braking(t, sample.braking)
         if added and t - self._last_fit_s > o.excitation_window_s:
             # The first samples after a pause in the data (the brake released and applied again
             # while older samples stay in the window): the excitation was read from samples that
             # are no longer the newest. Not carried into this fit.
             self._excitation_cache = None
-        if added and len(window) >= o.min_samples:
-            estimate = self._fit(t, v)
-        elif not added and sample.wheel_torques_unknown and (body := self._body_sum_estimate(t, v)) is not None:
-            estimate = body
-        elif len(window) >= o.min_samples and last is not None and last.status == Status.CONVERGING:
+        estimate = self._estimate_now(sample, added)
+        self._last_estimate = estimate
+        if estimate.status != Status.VALID and v >= o.peak_evidence_min_speed:
+            self._withdrawn_moving_s = t   # (`_hold`: what was withdrawn while moving stays withdrawn)
+        return estimate
+
+    def _estimate_now(self, sample: PhysicalSample, added: int) -> FrictionEstimate:
+        """This update's estimate: a fit of the window, or the body sum's; else the last
+        CONVERGING fit restated while the window still holds this stop's data; else this stop's
+        last fit where the window has run short of samples (`_starved`), or the hold."""
+        o = self.options
+        t, v = sample.time_s, sample.speed_mps
+        samples = len(self._window)
+        last = self._last_estimate
+        if added and samples >= o.min_samples:
+            return self._kept_as_stop_fit(self._fit(t, v), t)
+        if not added and sample.wheel_torques_unknown and (body := self._body_sum_estimate(t, v)) is not None:
+            return self._kept_as_stop_fit(body, t)
+        if samples >= o.min_samples and last is not None and last.status == Status.CONVERGING:
             # No usable sample this cycle (wheels deep in slip, a lost frame) while the window
             # still holds this stop's data: the untrusted fit stands. Falling back to the prior
             # here made MuMax flicker between the fit and the nominal dry-road peak.
             # (the brakes still hold a wheel in slip: not the pedal letting go, every slip fallen
             # below what the fit takes)
             slipping = sample.braking and any(slip >= o.min_slip for slip in sample.slip)
-            estimate = self._restate(last, t, slipping)
-        else:
-            estimate = self._hold(t, v)
-        self._last_estimate = estimate
-        if estimate.status != Status.VALID and v >= o.peak_evidence_min_speed:
-            self._withdrawn_moving_s = t   # (`_hold`: what was withdrawn while moving stays withdrawn)
+            return self._restate(last, t, slipping)
+        return self._starved(t, v)
+
+    def _follow_braking(self, t: float, braking: bool) -> None:
+        """When the brakes were last applied; a stop begun after `window_s` without them forgets
+        the last stop's fit (`_starved`): the road may be another."""
+        if braking:
+            if t - self._last_braking_s > self.options.window_s:
+                self._stop_fit = None
+            self._last_braking_s = t
+
+    def _kept_as_stop_fit(self, estimate: FrictionEstimate, t: float) -> FrictionEstimate:
+        """`estimate`, kept as this stop's last fit when it is one (not a hold, not the fit that
+        just saw the road change: that one describes the old road)."""
+        if estimate.status in (Status.CONVERGING, Status.VALID) and self._last_jump_s != t:
+            self._stop_fit = estimate
         return estimate
+
+    def _starved(self, now_s: float, speed: float) -> FrictionEstimate:
+        """A cycle with too few samples in the window to fit, nothing VALID standing, the brakes
+        applied within `window_s`: this stop's last fit, CONVERGING. The wheels ran deep into slip
+        and their samples left the window (a threshold ABS dwelling past the peak, a car whose
+        wheel torques are unknown while its body sum refills). The contract's NOT_EXCITED says no
+        slip excursion was seen yet, and its MuMax, the nominal dry road's peak, was off by a
+        median of 120 % there (the campaign's ABS stops); the stop's last fit, by 22 %. Else the
+        hold: a VALID standing, the last VALID, or the prior."""
+        fit = self._stop_fit
+        if fit is None or self._last_valid is not None or now_s - self._last_braking_s > self.options.window_s:
+            return self._hold(now_s, speed)
+        return FrictionEstimate(now_s, Status.CONVERGING, fit.mu_max, fit.slip_at_mu_max, fit.theta, 0.0,
+                                fit.wheel_mu_max, fit.mu_max_std, dict(fit.detail))
 
     @property
     def not_valid_reason(self) -> str:
@@ -670,6 +710,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._mu_history.clear()
         self._clear_body_sum()
         self._last_update_s = None
+        self._stop_fit = None
+        self._last_braking_s = -math.inf
         # The times kept as anchors (last excitation, last jump) are from the old clock: left
         # there, `now − last excitation` would stay negative, and a VALID would be held for as
         # long as the clock went back (hours of free rolling) instead of `hold_s`. Carry them

@@ -94,6 +94,7 @@ class RoadChangeTest:
             self._jump_times.append(now_s)
             # What was valid described the old road: nothing may be held VALID from it.
             self._last_valid = None
+            self._stop_fit = None
             self._last_excited_s = -math.inf
             self._excitation_cache = None
             self._data_above_fit = 0.0

@@ -301,8 +301,9 @@ def test_window_jacobian_matches_finite_differences():
 
 
 def test_a_cycle_without_usable_wheels_keeps_the_running_fit():
-    # Wheels deep in slip (or a lost frame) give no usable sample for a few cycles: the
-    # untrusted fit stands until its window runs empty, instead of the nominal prior's peak.
+    # Wheels deep in slip (or a lost frame) give no usable sample for a while: the untrusted
+    # fit stands, CONVERGING, while the brakes stay applied, also once its samples have left
+    # the window, instead of the nominal prior's peak (NOT_EXCITED: no excursion seen yet).
     p = tm.LugreParams(theta=6.0)
     curve = lugre_curve(p)
     est = LugreTrustRegionEstimator()
@@ -310,15 +311,19 @@ def test_a_cycle_without_usable_wheels_keeps_the_running_fit():
     for s in samples[:50]:
         fitted = est.update(s)
     assert fitted.status == Status.CONVERGING
-    held = []
-    for s in samples[50:]:
-        blind = dataclasses.replace(s, usable=(False,) * 4)
-        held.append(est.update(blind))
-    kept = [e for e in held if e.status == Status.CONVERGING]
-    assert all(e.mu_max == fitted.mu_max for e in kept)
-    assert held[:len(kept)] == kept and kept[-1].time_s - fitted.time_s >= 0.3
-    # Once the window has run dry, the prior again.
-    assert all(e.status == Status.NOT_EXCITED for e in held[len(kept):]) and len(kept) < len(held)
+    held = [est.update(dataclasses.replace(s, usable=(False,) * 4)) for s in samples[50:]]
+    assert held[-1].time_s - fitted.time_s > est.options.window_s   # (the window ran dry)
+    assert all(e.status == Status.CONVERGING and e.mu_max == fitted.mu_max for e in held)
+    # The brakes released: the fit stands for `window_s`, then the prior again; and a stop begun
+    # after that does not bring the last stop's fit back.
+    end = held[-1].time_s
+    released = [est.update(dataclasses.replace(samples[-1], time_s=end + 0.01 * k, braking=False,
+                                               usable=(False,) * 4)) for k in range(1, 121)]
+    prior_from = next(e.time_s for e in released if e.status == Status.NOT_EXCITED)
+    assert prior_from - end == pytest.approx(est.options.window_s, abs=0.02)
+    assert released[-1].mu_max != fitted.mu_max
+    again = est.update(dataclasses.replace(samples[-1], time_s=end + 1.3, usable=(False,) * 4))
+    assert again.status == Status.NOT_EXCITED and again.mu_max == released[-1].mu_max
 
 
 @pytest.mark.parametrize("every", [0, 1, 2, 3])

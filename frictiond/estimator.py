@@ -644,12 +644,13 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             return self._kept_as_stop_fit(self._fit(t, v), t)
         if not added and sample.wheel_torques_unknown and (body := self._body_sum_estimate(t, v)) is not None:
             return self._kept_as_stop_fit(body, t)
-        if samples >= o.min_samples and last is not None and last.status == Status.CONVERGING:
+        if (samples >= o.min_samples and last is not None and last.status == Status.CONVERGING
+                and last.time_s != self._last_jump_s):
             # No usable sample this cycle (wheels deep in slip, a lost frame) while the window
             # still holds this stop's data: the untrusted fit stands. Falling back to the prior
-            # here made MuMax flicker between the fit and the nominal dry-road peak.
-            # (the brakes still hold a wheel in slip: not the pedal letting go, every slip fallen
-            # below what the fit takes)
+            # here made MuMax flicker between the fit and the nominal dry-road peak. (Not the fit
+            # that saw the road change: it describes the old road. The brakes still hold a wheel
+            # in slip: not the pedal letting go, every slip fallen below what the fit takes.)
             slipping = sample.braking and any(slip >= o.min_slip for slip in sample.slip)
             return self._restate(last, t, slipping)
         return self._starved(t, v)
@@ -675,8 +676,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         and their samples left the window (a threshold ABS dwelling past the peak, a car whose
         wheel torques are unknown while its body sum refills). The contract's NOT_EXCITED says no
         slip excursion was seen yet, and its MuMax, the nominal dry road's peak, was off by a
-        median of 120 % there (the campaign's ABS stops); the stop's last fit, by 22 %. Else the
-        hold: a VALID standing, the last VALID, or the prior."""
+        median of 118–148 % there (the campaign's ABS stops); the stop's last fit, by 22–24 %.
+        Else the hold: a VALID standing, the last VALID, or the prior."""
         fit = self._stop_fit
         if fit is None or self._last_valid is not None or now_s - self._last_braking_s > self.options.window_s:
             return self._hold(now_s, speed)

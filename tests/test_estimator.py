@@ -166,6 +166,22 @@ def test_a_change_of_road_crossing_the_wheelbase_is_followed_to_the_rear_axle():
     assert first_right is not None and first_right < 0.45   # 0.56 s with a 0.3 s refractory time
 
 
+def test_a_blind_stretch_after_a_change_of_road_does_not_bring_back_the_old_roads_fit():
+    """The wheels' samples unusable from the moment a change of road (dry to ice) is detected:
+    the stop's last fit described the old road, so the window's shortage gives the prior
+    (NOT_EXCITED), not that fit restated as CONVERGING."""
+    dry, ice = lugre_curve(tm.LugreParams(theta=1.0)), lugre_curve(tm.LugreParams(theta=25.0))
+    est = LugreTrustRegionEstimator()
+    after = []
+    for s in braking(lambda t, i: ice if t >= 1.5 else dry, v0=25.0, seed=3, duration=2.2):
+        if est._jumps == 0:
+            est.update(s)
+        else:
+            after.append(est.update(dataclasses.replace(s, usable=(False,) * 4)))
+    assert len(after) > 20
+    assert all(e.status == Status.NOT_EXCITED for e in after)
+
+
 def test_the_rear_wheels_show_no_peak_while_their_axle_crosses_a_change_of_road():
     """After a change of road is detected the rear axle meets it a wheelbase later (2.7 m here):
     till then, and till the rear wheels' newest excitation window lies past it, their data mix

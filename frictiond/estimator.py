@@ -60,6 +60,7 @@ from .estimate_confidence import EstimateConfidence
 from .estimate_report import EstimateReport
 from .fit_parameters import FitParameters
 from .peak_evidence import PeakEvidence
+from .stop_fit import StopFit
 from .window_fit import WindowFit
 
 SHARED = ("sigma0", "v_s", "sigma2")
@@ -431,7 +432,7 @@ class _SmoothedMaximum:
 
 
 class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, EstimateReport, FitParameters,
-                                AxleBalance, BodySumReport):
+                                AxleBalance, BodySumReport, StopFit):
     """Recursive, bounded trust-region NLLS fit of static LuGre; one `update` per bus cycle."""
 
     kind = "lugre-tr"
@@ -654,35 +655,6 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             slipping = sample.braking and any(slip >= o.min_slip for slip in sample.slip)
             return self._restate(last, t, slipping)
         return self._starved(t, v)
-
-    def _follow_braking(self, t: float, braking: bool) -> None:
-        """When the brakes were last applied; a stop begun after `window_s` without them forgets
-        the last stop's fit (`_starved`): the road may be another."""
-        if braking:
-            if t - self._last_braking_s > self.options.window_s:
-                self._stop_fit = None
-            self._last_braking_s = t
-
-    def _kept_as_stop_fit(self, estimate: FrictionEstimate, t: float) -> FrictionEstimate:
-        """`estimate`, kept as this stop's last fit when it is one (not a hold, not the fit that
-        just saw the road change: that one describes the old road)."""
-        if estimate.status in (Status.CONVERGING, Status.VALID) and self._last_jump_s != t:
-            self._stop_fit = estimate
-        return estimate
-
-    def _starved(self, now_s: float, speed: float) -> FrictionEstimate:
-        """A cycle with too few samples in the window to fit, nothing VALID standing, the brakes
-        applied within `window_s`: this stop's last fit, CONVERGING. The wheels ran deep into slip
-        and their samples left the window (a threshold ABS dwelling past the peak, a car whose
-        wheel torques are unknown while its body sum refills). The contract's NOT_EXCITED says no
-        slip excursion was seen yet, and its MuMax, the nominal dry road's peak, was off by a
-        median of 118–148 % there (the campaign's ABS stops); the stop's last fit, by 22–24 %.
-        Else the hold: a VALID standing, the last VALID, or the prior."""
-        fit = self._stop_fit
-        if fit is None or self._last_valid is not None or now_s - self._last_braking_s > self.options.window_s:
-            return self._hold(now_s, speed)
-        return FrictionEstimate(now_s, Status.CONVERGING, fit.mu_max, fit.slip_at_mu_max, fit.theta, 0.0,
-                                fit.wheel_mu_max, fit.mu_max_std, dict(fit.detail))
 
     @property
     def not_valid_reason(self) -> str:

@@ -43,6 +43,10 @@ class AccuracyReport:
     output_count: int
     mean_truth: float
     confidence_errors: list[tuple[float, float]] = field(default_factory=list)
+    # The outputs in the evaluated span that are not VALID, and how many of them are within
+    # FALSE_VALID_REL of the truth: what a consumer reading MuMax regardless of status would get.
+    unvalid_count: int = 0
+    unvalid_within_count: int = 0
 
     @property
     def false_valid_share(self) -> float:
@@ -120,6 +124,8 @@ def evaluate(estimates: Sequence[FrictionEstimate], truth_rows: Sequence[dict[st
         output_count=len(estimates),
         mean_truth=float(np.mean(truth_mu[in_span])) if in_span.any() else math.nan,
         confidence_errors=confidence_errors,
+        unvalid_count=int((in_span & ~valid).sum()),
+        unvalid_within_count=int((in_span & ~valid & (err <= FALSE_VALID_REL * np.maximum(truth_mu, 1e-3))).sum()),
     )
 
 

@@ -209,3 +209,20 @@ def test_firm_braking_applied_briskly_is_no_run_away(tmp_path):
     Counted as a run-away, it made 265 of 302 outputs VALID with μ_max 40 % low."""
     _, r = run_at_cycle_time(tmp_path, "moderate_wet/burckhardt", 5)
     assert r.valid_count == 0
+
+
+def test_the_outputs_that_are_not_valid_are_counted_in_the_span_with_those_near_the_truth():
+    """`evaluate` counts the span's non-VALID outputs (from 0.5 s after some slip first exceeds
+    5 % to the end of braking) and how many are within 20 % of the truth; VALID ones and those
+    outside the span are not counted."""
+    from frictiond.samples import FrictionEstimate, Status
+
+    truth = [{"time_s": k / 100, "braking": float(0.4 <= k / 100 < 1.9), "mu_max": 0.5,
+              **{f"slip_{w}": (0.1 if k / 100 >= 0.5 else 0.0) for w in ("fl", "fr", "rl", "rr")}}
+             for k in range(200)]
+    kinds = [(Status.VALID, 0.5), (Status.CONVERGING, 0.55), (Status.CONVERGING, 0.7), (Status.NOT_EXCITED, 0.41)]
+    estimates = [FrictionEstimate(k / 20, kinds[k % 4][0], kinds[k % 4][1], 0.1, 1.0, 0.7) for k in range(40)]
+    span = [e for e in estimates if 1.0 <= e.time_s <= 1.89]
+    rep = evaluate(estimates, truth)
+    assert rep.unvalid_count == sum(e.status != Status.VALID for e in span) == 13
+    assert rep.unvalid_within_count == sum(e.status != Status.VALID and e.mu_max in (0.55, 0.41) for e in span) == 9

@@ -13,8 +13,8 @@ import pytest
 from frictiond.campaign import draw as draw_mod
 from frictiond.campaign.abs_control import ABS_FAMILIES
 from frictiond.campaign.draw import HELD_OUT_BASE, MANOEUVRES, Stress, draw_stop, seeds_for
-from frictiond.campaign.report import (format_families, format_not_valid, format_peak_shown, full_report,
-                                      reproduce_command, target_rows)
+from frictiond.campaign.report import (format_families, format_not_valid, format_peak_shown, format_unvalid,
+                                      full_report, reproduce_command, target_rows)
 from frictiond.campaign.run import load_rows, run_campaign, save_rows
 from frictiond.campaign.score import truth_summary
 from frictiond.campaign.sensors import MASTER_MESSAGE, PRESSURE_MESSAGE, REAR_WHEEL_MESSAGE, WHEEL_MESSAGE
@@ -314,6 +314,14 @@ def test_a_small_campaign_runs_end_to_end_and_reports(tmp_path):
                     if line.startswith("grade=")}
     assert grade_counts == {"grade=flat": 2, "grade=up <4%": 1, "grade=up >=4%": 1, "grade=down <4%": 1,
                             "grade=down >=4%": 1}
+    # MuMax while not VALID: the span's other outputs, and those within 20 % of the truth.
+    ab = [r for r in rows if r["abs"] != "d-none"]
+    for r in rows:
+        assert 0 <= r["lugre_unvalid_within"] <= r["lugre_unvalid"] <= r["lugre_outputs"] - r["lugre_valid"]
+    n, within = sum(r["lugre_unvalid"] for r in ab), sum(r["lugre_unvalid_within"] for r in ab)
+    assert n > 0 and f"lugre-tr        {100 * within / n:.1f} % of {n} within 20 %" in format_unvalid(rows)
+    assert "no counts in these rows" in format_unvalid([{k: v for k, v in r.items() if "unvalid" not in k}
+                                                        for r in rows])
     names = [t[0] for t in target_rows(rows, "lugre")]
     assert len(names) == 14 and names[-1].endswith("0.9")
     path = tmp_path / "rows.json"

@@ -121,6 +121,21 @@ def format_comparison(rows: Sequence[Row]) -> str:
     return "\n".join(lines)
 
 
+def format_unvalid(rows: Sequence[Row]) -> str:
+    """What MuMax is worth while not VALID (no target: the contract says not to trust it, but a
+    consumer showing it, and the estimator's choice of what to say then, are judged by it): the
+    ABS stops' outputs in the evaluated span that are not VALID, and the share within 20 % of
+    the truth. Rows saved before these counts existed give none."""
+    ab = abs_rows(rows)
+    lines = ["== MuMax while not VALID (ABS stops, evaluated span) =="]
+    for p, kind in ESTIMATORS.items():
+        n = sum(r.get(f"{p}_unvalid", 0) for r in ab)
+        within = sum(r.get(f"{p}_unvalid_within", 0) for r in ab)
+        shown = f"{100 * within / n:.1f} % of {n} within 20 % of the truth" if n else "no counts in these rows"
+        lines.append(f"{kind:15s} {shown}")
+    return "\n".join(lines)
+
+
 def _group_line(label: str, group: Sequence[Row]) -> str:
     cells = []
     for p in ESTIMATORS:
@@ -310,6 +325,6 @@ def format_worst(rows: Sequence[Row], n: int, family: str | None = None, p: str 
 
 def full_report(rows: Sequence[Row], title: str, worst: int = 15, family: str | None = None,
                 stress: Stress | None = None) -> str:
-    return "\n\n".join([format_targets(rows, title), format_comparison(rows), format_families(rows),
-                        format_not_valid(rows), format_peak_shown(rows), format_distributions(rows),
+    return "\n\n".join([format_targets(rows, title), format_comparison(rows), format_unvalid(rows),
+                        format_families(rows), format_not_valid(rows), format_peak_shown(rows), format_distributions(rows),
                         format_worst(rows, worst, family, stress=stress)])

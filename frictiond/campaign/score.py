@@ -68,7 +68,7 @@ def estimator_scores(estimates: Sequence[FrictionEstimate], truth: list[dict[str
         "mae": rep.mae, "mae_rel": rep.mae_rel, "valid_share": rep.valid_share, "conv_s": rep.convergence_s,
         "reconv_s": math.nan if rep.reconvergence_s is None else rep.reconvergence_s,
         "false_valid": rep.false_valid_count, "valid": rep.valid_count, "outputs": rep.output_count,
-        "span_truth": rep.mean_truth,
+        "span_truth": rep.mean_truth, "unvalid": rep.unvalid_count, "unvalid_within": rep.unvalid_within_count,
         "faults": sum(1 for e in estimates if e.status == Status.FAULT), "crash": "",
     }
     speed = np.array([r["speed_mps"] for r in truth])
@@ -102,6 +102,7 @@ def _crashed(exc: BaseException) -> dict[str, Any]:
     where = f" at {last.filename.rsplit('/', 1)[-1]}:{last.lineno}" if last else ""
     out: dict[str, Any] = {"mae": math.inf, "mae_rel": math.inf, "valid_share": 0.0, "conv_s": math.inf,
                            "reconv_s": math.nan, "false_valid": 0, "valid": 0, "outputs": 0, "span_truth": math.nan,
+                           "unvalid": 0, "unvalid_within": 0,
                            "faults": 0, "faults_moving": 0, "crash": f"{type(exc).__name__}: {exc}"[:200] + where,
                            "not_valid": "{}"}
     for c in CALIBRATION_LEVELS:

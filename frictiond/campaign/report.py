@@ -326,5 +326,5 @@ def format_worst(rows: Sequence[Row], n: int, family: str | None = None, p: str 
 def full_report(rows: Sequence[Row], title: str, worst: int = 15, family: str | None = None,
                 stress: Stress | None = None) -> str:
     return "\n\n".join([format_targets(rows, title), format_comparison(rows), format_unvalid(rows),
-                        format_families(rows), format_not_valid(rows), format_peak_shown(rows), format_distributions(rows),
-                        format_worst(rows, worst, family, stress=stress)])
+                        format_families(rows), format_not_valid(rows), format_peak_shown(rows),
+                        format_distributions(rows), format_worst(rows, worst, family, stress=stress)])

@@ -15,7 +15,7 @@ import math
 from collections import deque
 
 from . import input_quality, not_valid
-from .body_sum_fit import MISFIT, ROAD_CHANGE, BodySumFit
+from .body_sum_fit import MISFIT, ROAD_CHANGE, BodySumFit, BodySumOptions
 from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
 from .tyre_model import LugreParams
 
@@ -31,7 +31,9 @@ class BodySumReport:
         shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
                             alpha=o.alpha, patch_length=o.patch_length)
         self._body_sum = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),
-                                    o.left_right_coupling)
+                                    o.left_right_coupling,
+                                    BodySumOptions(peak_extrapolation=o.peak_extrapolation,
+                                                   extrapolation_max_slip=o.extrapolation_max_slip))
         self._body_sum_history: deque[tuple[float, float]] = deque()
         self._body_force_doubt = 0.0   # the newest row's (`PhysicalSample.body_force_doubt`)
 

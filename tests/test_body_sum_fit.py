@@ -292,3 +292,16 @@ def test_wheels_locking_each_cycle_on_one_road_are_not_a_change_of_road():
         verdicts.append(result.verdict if result else None)
     assert ROAD_CHANGE not in verdicts
     assert sum(v is not None for v in verdicts) > 0.7 * len(verdicts)   # (a fit at most updates)
+
+
+def test_wheels_held_short_of_the_peak_read_it_no_further_than_their_slips_support():
+    """A slip controller holding the wheels between 0.1 and 0.35 of dry asphalt's peak slip: the
+    sum bounds the curve over those slips only. The fitted curve's own peak lies far beyond them
+    (the prior's shape); μ_max is read at 1.6 times the highest slip, as the wheels' fit does."""
+    peak_mu, peak_slip = burckhardt_peak(DRY)
+    data = rows([DRY] * 4, lambda t: cycling_slips(t, peak_slip, low=0.1, high=0.35), noise=0.005)
+    held = fitted(new_fit(), data)
+    free = fitted(new_fit(peak_extrapolation=1e9, extrapolation_max_slip=1.0), data)
+    assert held.verdict == free.verdict != ""
+    assert free.mu_max > 2.0 * peak_mu   # (the prior's shape peaks at slip 0.68 here)
+    assert held.mu_max < 0.6 * free.mu_max and held.mu_max < 1.2 * peak_mu

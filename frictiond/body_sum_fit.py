@@ -231,8 +231,8 @@ class BodySumFit:
 
     def _held_within_data(self, x: np.ndarray, wheel_mu: np.ndarray, wheel_slip: np.ndarray, support: np.ndarray,
                           speed: float) -> np.ndarray:
-        """Each wheel's peak μ, read no further than the slips it was fitted on support (the
-        wheels' fit's rule, `EstimateReport`): beyond `peak_extrapolation` times its highest slip
+        """Each wheel's peak μ, read no further than its fitted slips reach (the wheels' fit's
+        rule, `EstimateReport`): beyond `peak_extrapolation` times its highest slip (`support`)
         (and `extrapolation_max_slip` where it did not go) the curve's rise is the prior's shape,
         not the tyre's. Where a slip controller or a gentle stop kept the wheels short of the
         fitted peak, that peak read 15 % above the road on average on the development campaign's

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .samples import LEFT_WHEELS, N_WHEELS, RIGHT_WHEELS
-from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian_theta, peak
+from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian_theta, peak, supported_slip
 
 # Each wheel's side (0 left, 1 right): the index of its θ.
 _SIDE_INDEX = np.array([0 if i in LEFT_WHEELS else 1 for i in range(N_WHEELS)])
@@ -232,13 +232,13 @@ class BodySumFit:
     def _held_within_data(self, x: np.ndarray, wheel_mu: np.ndarray, wheel_slip: np.ndarray, support: np.ndarray,
                           speed: float) -> np.ndarray:
         """Each wheel's peak μ, read no further than its fitted slips reach (the wheels' fit's
-        rule, `EstimateReport`): beyond `peak_extrapolation` times its highest slip (`support`)
+        rule, `tyre_model.supported_slip`): beyond `peak_extrapolation` times its highest slip (`support`)
         (and `extrapolation_max_slip` where it did not go) the curve's rise is the prior's shape,
         not the tyre's. Where a slip controller or a gentle stop kept the wheels short of the
         fitted peak, that peak read 15 % above the road on average on the development campaign's
         cars that send their master cylinder's pressure alone (dev 0–999), 2 % held so."""
         o = self.options
-        cap = np.minimum(support * o.peak_extrapolation, np.maximum(support, o.extrapolation_max_slip))
+        cap = supported_slip(support, o.peak_extrapolation, o.extrapolation_max_slip)
         beyond = wheel_slip > cap
         if not beyond.any():
             return wheel_mu

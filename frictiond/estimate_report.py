@@ -17,7 +17,7 @@ import numpy as np
 
 from . import not_valid
 from .samples import N_WHEELS, FrictionEstimate, Status
-from .tyre_model import LugreParams, braking_mu_and_partials_few, peaks
+from .tyre_model import LugreParams, braking_mu_and_partials_few, peaks, supported_slip
 
 _WHEEL_STD_KEYS = tuple(f"wheel_std_{i}" for i in range(N_WHEELS))
 
@@ -295,7 +295,7 @@ def _peak_report_numpy(wheel_mu: list[float], wheel_lam: list[float], support: l
         # own lately: it is bounded by the slips its car-mates have seen, not left to read
         # its peak at lock.
         support = np.where(np.isfinite(support), support, support[np.isfinite(support)].max())
-    cap = np.minimum(support * peak_extrapolation, np.maximum(support, extrapolation_max_slip))
+    cap = supported_slip(support, peak_extrapolation, extrapolation_max_slip)
     beyond = wheel_lam > cap
     floor = np.array(slip_floor) / peak_extrapolation
     below = wheel_lam < floor

@@ -108,7 +108,8 @@ def evaluate(estimates: Sequence[FrictionEstimate], truth_rows: Sequence[dict[st
         if jump_t > onset:
             reconvergence = _time_to_converge(times, mu, truth_mu, valid, jump_t)
 
-    false_valid = valid & (err > FALSE_VALID_REL * np.maximum(truth_mu, 1e-3))
+    tolerance = FALSE_VALID_REL * np.maximum(truth_mu, 1e-3)
+    false_valid = valid & (err > tolerance)
     confidence = np.array([e.confidence for e in estimates], dtype=float)
     rated = confidence > 0
     rel_err = err / np.maximum(truth_mu, 1e-3)
@@ -125,7 +126,7 @@ def evaluate(estimates: Sequence[FrictionEstimate], truth_rows: Sequence[dict[st
         mean_truth=float(np.mean(truth_mu[in_span])) if in_span.any() else math.nan,
         confidence_errors=confidence_errors,
         unvalid_count=int((in_span & ~valid).sum()),
-        unvalid_within_count=int((in_span & ~valid & (err <= FALSE_VALID_REL * np.maximum(truth_mu, 1e-3))).sum()),
+        unvalid_within_count=int((in_span & ~valid & (err <= tolerance)).sum()),
     )
 
 

@@ -355,6 +355,15 @@ def _mu_grid(lam: np.ndarray, v: float, thetas: np.ndarray, p: LugreParams) -> n
     return (g / thetas) * (1.0 + np.expm1(-Z) / Z) + (p.sigma2 * v) * lam
 
 
+def supported_slip(support: np.ndarray, peak_extrapolation: float, extrapolation_max_slip: float) -> np.ndarray:
+    """The furthest slip a fitted curve's peak may be read at, from the highest slips its data
+    reached (`support`, per wheel): `peak_extrapolation` times them, and beyond them no further
+    than `extrapolation_max_slip`. Past that the curve's rise is the model's shape, not the
+    tyre's (the wheels' peak report, compiled in `_fitcore.peak_report` too, and the car's total
+    force both hold their peaks to it)."""
+    return np.minimum(support * peak_extrapolation, np.maximum(support, extrapolation_max_slip))
+
+
 def peak(speed_mps: float, p: LugreParams) -> tuple[float, float]:
     """(μ_max, λ*) at one vehicle speed: the first maximum of μ(λ, v) over braking slip."""
     m, lam = peaks(speed_mps, p, [p.theta])

@@ -60,7 +60,10 @@ class BodySumReport:
         while history and history[0][0] < now_s - DRIFT_WINDOW_S:
             history.popleft()
         if speed < o.peak_evidence_min_speed:
-            return self._hold(now_s, speed)   # (a stop ending: a VALID standing is held, as the wheels' fit's)
+            # A stop ending, where slips are no evidence: a VALID standing is held, as the
+            # wheels' fit's; without one, this stop's last fit stands, CONVERGING (`_starved`),
+            # not the prior: the wheels were braked past the slip excursion NOT_EXCITED denies.
+            return self._starved(now_s, speed)
         scale = max(mu_max, 0.05)
         drift = (max(m for _, m in history) - min(m for _, m in history)) / scale
         doubt = self._body_force_doubt / scale

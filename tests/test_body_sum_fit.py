@@ -187,10 +187,11 @@ def test_rows_a_fit_cannot_take_are_left_out():
     assert fit.result(2.0, 20.0) is None
 
 
-def body_samples(curve, slips_of, seconds=2.5, torques_unknown=True, noise=0.01, seed=5):
+def body_samples(curve, slips_of, seconds=2.5, torques_unknown=True, noise=0.01, seed=5, speed=20.0):
     """Samples of a car whose wheels' μ the front end could not measure (`usable` all False)."""
     out = []
-    for t, speed, slips, loads, body, lateral in rows([curve] * 4, slips_of, seconds=seconds, noise=noise, seed=seed):
+    for t, speed, slips, loads, body, lateral in rows([curve] * 4, slips_of, seconds=seconds, noise=noise, seed=seed,
+                                                      speed=speed):
         out.append(PhysicalSample(time_s=t, speed_mps=speed, slip=slips, mu_used=(math.nan,) * 4, normal_force_n=loads,
                                   tyre_force_n=(0.0,) * 4, usable=(False,) * 4, braking=True, lateral_mu=lateral,
                                   body_force_mu=body, wheel_torques_unknown=torques_unknown))
@@ -242,6 +243,21 @@ def test_a_held_slip_keeps_the_estimate_converging_and_says_why():
     assert Status.VALID not in {e.status for e in estimates}
     assert estimates[-1].status == Status.CONVERGING
     assert estimator.not_valid_reason.startswith("no peak shown in the car's total force (wheels' slips not across")
+
+
+def test_a_stop_ending_without_valid_keeps_the_body_sums_last_fit():
+    """Below `peak_evidence_min_speed` slips are no evidence and the body sum's fit is not
+    published; with no VALID to hold, the stop's last fit stands, CONVERGING, not the prior
+    (NOT_EXCITED: no slip excursion seen), which flickered in between fits before."""
+    _, slip = burckhardt_peak(DRY)
+    estimator = LugreTrustRegionEstimator()
+    samples = body_samples(DRY, lambda t: np.full(4, 0.6 * slip), speed=8.0)   # (5 m/s at 1 s, 0.5 at 2.5 s)
+    estimates = [estimator.update(s) for s in samples]
+    moving = [e for e, s in zip(estimates, samples) if s.speed_mps >= estimator.options.peak_evidence_min_speed]
+    ending = [e for e, s in zip(estimates, samples) if s.speed_mps < estimator.options.peak_evidence_min_speed]
+    assert moving[-1].status == Status.CONVERGING and len(ending) > 100
+    assert all(e.status == Status.CONVERGING and e.mu_max == moving[-1].mu_max and e.confidence == 0.0
+               for e in ending)
 
 
 def test_a_master_cylinder_car_under_abs_gets_a_valid_estimate_from_its_body():

@@ -480,7 +480,7 @@ enum {
     K_TRACK_REAR, K_INERTIA, K_GAIN_CORRECTION, K_GAIN_MIN_DECEL, K_ROLLING, K_DRAG, K_GAIN_LIMITS, K_GAIN_TAU,
     K_MAX_SLIP, K_HAS_DRIVE, K_HAS_YAW, K_MASTER_ONLY, K_BRAKE_GAIN_FL, K_BRAKE_GAIN_FR, K_BRAKE_GAIN_RL, K_BRAKE_GAIN_RR,
     K_LAG_COMPENSATION, K_BIAS_SETTLE, K_CORRECTION_RATE, K_CORRECTION_HOLD, K_DRAG_DOUBT, K_WIND_DOUBT, K_LEVEL_ROAD,
-    K_ACCEL_TOLERANCE, K_COASTING_OFFSET, K_COUNT
+    K_ACCEL_TOLERANCE, K_COASTING_OFFSET, K_RELEASED_S, K_RELEASED_MIN_SLIP, K_COUNT
 };
 
 #define MAX_ABS_ACCEL 30.0
@@ -512,7 +512,7 @@ enum {
 #define GRAVITY 9.80665
 
 /* The FrontEnd attributes sample_physics reads and writes. */
-static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_last_sample, *A_bias, *A_bias_samples, *A_bias_m2,
+static PyObject *A_repeats, *A_dead, *A_low_since, *A_low_unbraked, *A_braked_time, *A_last_sample, *A_bias, *A_bias_samples, *A_bias_m2,
     *A_unexplained, *A_speed_time, *A_speed_est, *A_ref_disagreements, *A_gain_tt, *A_gain_tn, *A_gain_t, *A_gain_n,
     *A_gain_w, *A_sensed_needed, *A_sensed_needed_time, *A_sensor_offset, *A_sensor_offset_doubt,
     *A_recent_lag, *A_last_brake, *A_recent_weight, *A_recent_needed, *A_recent_brake, *A_gain_factor, *A_gain_doubt, *A_model_holds, *A_released,
@@ -523,7 +523,7 @@ typedef struct {
     long repeats[NW];
     int dead[NW];
     int has_low_since[NW];
-    double low_since[NW], low_unbraked[NW];
+    double low_since[NW], low_unbraked[NW], braked_time[NW];
     int has_last_sample, has_speed_time, has_speed_est, has_faster_since, restarted_braking;
     double last_sample, bias, unexplained, speed_time, speed_est, slipping_time, faster_since;
     long bias_samples, ref_disagreements, rolling_samples;
@@ -593,10 +593,10 @@ static PyObject *list_attr(PyObject *obj, PyObject *name)
 static int load_state(PyObject *fe, FEState *s)
 {
     s->free_rolling = 0;
-    PyObject *repeats = NULL, *dead = NULL, *since = NULL, *unbraked = NULL;
+    PyObject *repeats = NULL, *dead = NULL, *since = NULL, *unbraked = NULL, *braked_time = NULL;
     int rc = -1;
     if (!(repeats = list_attr(fe, A_repeats)) || !(dead = list_attr(fe, A_dead)) || !(since = list_attr(fe, A_low_since))
-        || !(unbraked = list_attr(fe, A_low_unbraked)))
+        || !(unbraked = list_attr(fe, A_low_unbraked)) || !(braked_time = list_attr(fe, A_braked_time)))
         goto out;
     for (int i = 0; i < NW; i++) {
         if ((s->repeats[i] = PyLong_AsLong(PyList_GET_ITEM(repeats, i))) == -1 && PyErr_Occurred())
@@ -607,6 +607,7 @@ static int load_state(PyObject *fe, FEState *s)
         s->has_low_since[i] = t != Py_None;
         s->low_since[i] = s->has_low_since[i] ? PyFloat_AsDouble(t) : 0.0;
         s->low_unbraked[i] = PyFloat_AsDouble(PyList_GET_ITEM(unbraked, i));
+        s->braked_time[i] = PyFloat_AsDouble(PyList_GET_ITEM(braked_time, i));
         if (PyErr_Occurred())
             goto out;
     }
@@ -661,6 +662,7 @@ out:
     Py_XDECREF(dead);
     Py_XDECREF(since);
     Py_XDECREF(unbraked);
+    Py_XDECREF(braked_time);
     return rc;
 }
 
@@ -682,21 +684,24 @@ static PyObject *float_or_none(int present, double v)
 /* What sample_physics changed, written back (the lists in place, as the Python code does). */
 static int store_state(PyObject *fe, const FEState *s)
 {
-    PyObject *dead = NULL, *since = NULL, *unbraked = NULL;
+    PyObject *dead = NULL, *since = NULL, *unbraked = NULL, *braked_time = NULL;
     int rc = -1;
     if (!(dead = list_attr(fe, A_dead)) || !(since = list_attr(fe, A_low_since))
-        || !(unbraked = list_attr(fe, A_low_unbraked)))
+        || !(unbraked = list_attr(fe, A_low_unbraked)) || !(braked_time = list_attr(fe, A_braked_time)))
         goto out;
     for (int i = 0; i < NW; i++) {
         PyObject *t = float_or_none(s->has_low_since[i], s->low_since[i]), *u = PyFloat_FromDouble(s->low_unbraked[i]);
-        if (!t || !u) {
+        PyObject *b = PyFloat_FromDouble(s->braked_time[i]);
+        if (!t || !u || !b) {
             Py_XDECREF(t);
             Py_XDECREF(u);
+            Py_XDECREF(b);
             goto out;
         }
         PyList_SetItem(dead, i, PyBool_FromLong(s->dead[i]));
         PyList_SetItem(since, i, t);
         PyList_SetItem(unbraked, i, u);
+        PyList_SetItem(braked_time, i, b);
     }
     if (set_attr_new(fe, A_last_sample, float_or_none(s->has_last_sample, s->last_sample)) < 0
         || set_attr_new(fe, A_bias, PyFloat_FromDouble(s->bias)) < 0
@@ -740,6 +745,7 @@ out:
     Py_XDECREF(dead);
     Py_XDECREF(since);
     Py_XDECREF(unbraked);
+    Py_XDECREF(braked_time);
     return rc;
 }
 
@@ -1362,11 +1368,15 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         const double force = (inertia[i] + gain * torques[i] - drive[i]) / radius;
         const double load = loads[i];
         const double mu = load > 50.0 ? force / load : 0.0;
-        const int ok = speed >= k[K_MIN_SPEED] && fabs(slip) <= k[K_MAX_SLIP]
-                       && (braked[i] || (has_drive && fabs(drive[i]) > 20.0)) && load > 50.0 && !glitch && !stuck[i]
-                       && !dead[i] && isfinite(mu) && s.model_holds && !s.released;
         if (braked[i] && slip > SETTLE_SLIP)
             s.slipping_time = t_c;
+        /* FrontEnd._torqued_by_brakes */
+        if (braked[i])
+            s.braked_time[i] = t_c;
+        const int torqued = braked[i] || (t_c - s.braked_time[i] <= k[K_RELEASED_S] && slip >= k[K_RELEASED_MIN_SLIP]);
+        const int ok = speed >= k[K_MIN_SPEED] && fabs(slip) <= k[K_MAX_SLIP]
+                       && (torqued || (has_drive && fabs(drive[i]) > 20.0)) && load > 50.0 && !glitch && !stuck[i]
+                       && !dead[i] && isfinite(mu) && s.model_holds && !s.released;
         slips[i] = slip;
         forces[i] = force;
         mus[i] = mu;
@@ -1411,7 +1421,7 @@ static int intern_attributes(void)
 {
     struct { PyObject **slot; const char *name; } names[] = {
         {&A_repeats, "_repeats"}, {&A_dead, "_dead"}, {&A_low_since, "_low_since_s"},
-        {&A_low_unbraked, "_low_unbraked_s"}, {&A_last_sample, "_last_sample_time_s"}, {&A_bias, "_accel_bias_mps2"},
+        {&A_low_unbraked, "_low_unbraked_s"}, {&A_braked_time, "_braked_time_s"}, {&A_last_sample, "_last_sample_time_s"}, {&A_bias, "_accel_bias_mps2"},
         {&A_bias_samples, "_accel_bias_samples"}, {&A_bias_m2, "_accel_bias_m2"},
         {&A_rolling_offset, "_rolling_offset_mps2"}, {&A_rolling_samples, "_rolling_offset_samples"},
         {&A_rolling_m2, "_rolling_offset_m2"}, {&A_rolling_air, "_rolling_air_doubt_mps2"}, {&A_unexplained, "_unexplained_s"},

@@ -78,6 +78,16 @@ class FrontEndOptions:
     min_speed: float = 3.0                # m/s; below it slip is ill-conditioned
     max_slip: float = 0.6                 # samples beyond it (near lock) are not used
     min_brake_pressure: float = 1.0       # bar above push-out for a wheel to count as braked
+    # A wheel the ABS released (braked within `released_wheel_s`) spinning back up from deep
+    # slip: the road's force alone turns it, J·ω̇ = r·F_x, a sample of its tyre's curve with no
+    # brake torque to doubt. On ice a slow-dump ABS holds the wheels released for most of each
+    # cycle; the spin-up lasts up to ~1 s there at speed (`accel_bias_settle_s`). Only from
+    # `released_min_slip` up, past a low-μ road's peak, where the curve is flat in slip: nearer
+    # the peak the spin-up sweeps the curve's steep side faster than the tyre's force follows
+    # (its relaxation), and the samples read above the static curve (10 % of the peak over a
+    # band of slips in the built-in `ice_fast` scenario, holding its first VALID back 0.9 s).
+    released_wheel_s: float = 1.0
+    released_min_slip: float = 0.1
     stale_periods: float = 3.0            # an input older than this many periods is stale
     default_period: float = 0.01          # s, when the DBC gives no cycle time
     # rad/s a glitch sample is off its neighbours and both sides' trends, on top of what the wheel's
@@ -270,6 +280,7 @@ class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, Dou
         self._last_sample_time_s: float | None = None
         self._low_since_s: list[float | None] = [None] * 4
         self._low_unbraked_s = [0.0] * 4
+        self._braked_time_s = [-math.inf] * 4   # when each wheel was last braked (`released_wheel_s`)
         self._dead = [False] * 4
         self._torque_weights: list[float] | None = None
         self._torque_omega_dot: list[float] | None = None   # the ω̇ those weights go with

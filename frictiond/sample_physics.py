@@ -54,7 +54,8 @@ class SamplePhysics:
             float(self.pressures_are_master), *self._brake_gains, options.pressure_lag_compensation,
             options.accel_bias_settle_s, options.speed_correction_rate, options.speed_correction_hold_s,
             vehicle.drag_area_doubt, vehicle.wind_doubt, options.level_road,
-            options.accel_offset_tolerance, options.coasting_offset))
+            options.accel_offset_tolerance, options.coasting_offset, options.released_wheel_s,
+            options.released_min_slip))
 
     def _compute_sample(self, stale: tuple[str, ...]) -> FrontEndResult:
         t_c, omega, omega_dot, glitch = self._fit_wheels()
@@ -112,7 +113,8 @@ class SamplePhysics:
         for i in range(4):
             if braked[i] and slips[i] > SETTLE_SLIP:
                 self._slipping_time_s = t_c
-        usable = self._usable(speed, glitch, slips, braked, drive, loads, stuck, dead, mus)
+        usable = self._usable(speed, glitch, slips, self._torqued_by_brakes(t_c, braked, slips), drive, loads,
+                              stuck, dead, mus)
 
         sample = PhysicalSample(
             time_s=t_c,
@@ -176,16 +178,29 @@ class SamplePhysics:
         radius = veh.wheel_radius
         return [(inertia_torques[i] + gain * brake_torques[i] - drive[i]) / radius for i in range(4)]
 
-    def _usable(self, speed: float, glitch: bool, slips: list[float], braked: list[bool], drive: list[float],
+    def _torqued_by_brakes(self, t_c: float, braked: list[bool], slips: list[float]) -> list[bool]:
+        """Which wheels the brakes torque now or turned into the slip they spin back up from: braked,
+        or released within `released_wheel_s` and still slipping `released_min_slip` or more."""
+        opts = self.options
+        last = self._braked_time_s
+        torqued = []
+        for i in range(4):
+            if braked[i]:
+                last[i] = t_c
+            torqued.append(braked[i] or (t_c - last[i] <= opts.released_wheel_s and slips[i] >= opts.released_min_slip))
+        return torqued
+
+    def _usable(self, speed: float, glitch: bool, slips: list[float], torqued: list[bool], drive: list[float],
                 loads: list[float], stuck: list[bool], dead: list[bool], mus: list[float]) -> list[bool]:
         """Which wheels' samples the estimator may fit: a sound sample (speed, no glitch, the brake
-        model holding) of a torqued wheel, short of lock, loaded, its sensor working."""
+        model holding) of a torqued wheel (`_torqued_by_brakes`, or driven), short of lock, loaded,
+        its sensor working."""
         opts = self.options
         good = (speed >= opts.min_speed and not glitch and self._brake_model_holds and not self._brake_released)
         return [
             good
             and abs(slips[i]) <= opts.max_slip
-            and (braked[i] or (self._has_drive_torque and abs(drive[i]) > MIN_DRIVE_TORQUE_NM))
+            and (torqued[i] or (self._has_drive_torque and abs(drive[i]) > MIN_DRIVE_TORQUE_NM))
             and loads[i] > MIN_LOAD_N
             and not stuck[i]
             and not dead[i]

@@ -232,7 +232,7 @@ def test_history_push_is_the_same_on_both_paths():
 
 
 # The state `_frontcore.sample_physics` carries between samples (on the FrontEnd's attributes).
-PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_last_sample_time_s", "_accel_bias_mps2",
+PHYSICS_STATE = ("_repeats", "_dead", "_low_since_s", "_low_unbraked_s", "_braked_time_s", "_last_sample_time_s", "_accel_bias_mps2",
                  "_accel_bias_samples", "_accel_bias_m2", "_unexplained_s", "_speed_time_s", "_speed_estimate_mps",
                  "_ref_disagreements", "_gain_sum_tt", "_gain_sum_tn", "_gain_sum_t", "_gain_sum_n", "_gain_sum_w",
                  "_sensor_offset_mps2", "_sensor_offset_doubt_mps2", "_recent_weight_nm", "_recent_lag_nm", "_last_brake_nm", "_recent_needed_nm",

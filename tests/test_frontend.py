@@ -381,6 +381,42 @@ def test_wheel_locked_briefly_under_abs_is_not_a_dead_sensor():
     assert not any(r.dead_wheels for _, r in results)
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_released_wheel_spinning_back_up_measures_its_tyre_by_its_acceleration(compiled):
+    """The ABS dumps the FL wheel's pressure at slip 0.4; the road spins it back up over 0.5 s.
+    With no brake torque, J·ω̇ = r·F_x: those samples are usable, their force the inertia's alone.
+    Under `released_min_slip` (near a low-μ road's peak, and rolling free), or slipping
+    `released_wheel_s` after its last braking (a torque the brakes did not make), not usable."""
+    v0, decel = 20.0, 1.0
+
+    def fl_slip(t):
+        if t < 0.5:
+            return 0.03
+        if t < 0.55:
+            return 0.03 + 0.37 * (t - 0.5) / 0.05
+        if t < 1.05:
+            return 0.4 * (1.0 - (t - 0.55) / 0.5)
+        return 0.2 if t >= 1.8 else 0.0
+
+    def fl_omega_dot(t):   # (of the spin-up)
+        slip = fl_slip(t)
+        return (-decel * (1.0 - slip) + (v0 - decel * t) * 0.8) / VEH.wheel_radius
+
+    drive = WheelDrive(lambda t, w: (v0 - decel * t) * (1.0 - fl_slip(t)) / VEH.wheel_radius,
+                       lambda t: 60.0 if t < 0.55 else 0.0, v0=v0, decel=decel, slip=0.03)
+    options = FrontEndOptions(brake_gain_correction=False)
+    results = [(t, r.sample) for t, r in feed_fl(_front_end(compiled, options), drive, 2.2) if r.sample]
+    spin_up = [(t, s) for t, s in results if 0.62 <= t <= 0.9]
+    assert len(spin_up) > 25 and all(s.usable[0] and s.slip[0] >= options.released_min_slip for _, s in spin_up)
+    for t, s in spin_up:
+        assert s.tyre_force_n[0] == pytest.approx(VEH.wheel_inertia * fl_omega_dot(t) / VEH.wheel_radius, rel=0.05)
+    near_peak = [s for t, s in results if 0.95 <= t <= 1.02]   # (slips 0.02-0.08)
+    rolling = [s for t, s in results if 1.15 <= t < 1.75]
+    late = [s for t, s in results if 1.9 <= t]
+    assert near_peak and rolling and late and not any(s.usable[0] for s in near_peak + rolling + late)
+    assert options.released_wheel_s < 1.9 - 0.55
+
+
 def test_brake_torque_is_filtered_like_the_wheel_acceleration():
     """ABS-like pressure swings with a constant road force (ice: the brake torque is mostly spent
     on the wheel's inertia). The derivative filter smooths ω̇ over its window; the brake torque it

@@ -158,15 +158,34 @@ class EstimateConfidence:
 
     def _barred_from_valid(self, now_s: float, mu_max: float, wheel_mu: Sequence[float]) -> str:
         """What bars μ_max from VALID whatever its confidence ("" when nothing does): below the
-        stop's floor, from a model that misfits the tyre (`_misfit`), or leaning on wheels that
-        have not shown their peak (`_leans_on_unshown_wheels`)."""
+        stop's floor, from a model that misfits the tyre (`_misfit`), leaning on wheels that
+        have not shown their peak (`_leans_on_unshown_wheels`) or on a side of the car without
+        samples (`_a_side_unsampled`)."""
         if mu_max < self._stop_floor():
             return not_valid.BELOW_STOP_FLOOR
         if self._misfit(now_s):
             return not_valid.MISFIT
         if self._leans_on_unshown_wheels(now_s, wheel_mu):
             return not_valid.UNSHOWN_WHEELS
+        if self._a_side_unsampled():
+            return not_valid.UNSAMPLED_SIDE
         return ""
+
+    def _a_side_unsampled(self) -> bool:
+        """Whether the window holds samples of one side of the car and none of the other.
+
+        μ_max is the load-weighted mean of the four wheels' peaks, and on split μ each side has
+        its own road: an unsampled side's peaks are the fit's coupling of it to the other side,
+        not a measurement of its road, and `_leans_on_unshown_wheels` cannot tell (they agree
+        with the sampled side by construction). At the end of a split-μ stop, with the pedal
+        released, only the low side's wheels spin back up from deep slip: their samples alone
+        read the car's μ_max as the low side's."""
+        w = self._window
+        if w.end == w.start:
+            return False
+        counts = np.bincount(w.wheel[w.start:w.end], minlength=N_WHEELS).tolist()
+        return (counts[LEFT_WHEELS[0]] + counts[LEFT_WHEELS[1]] == 0
+                or counts[RIGHT_WHEELS[0]] + counts[RIGHT_WHEELS[1]] == 0)
 
     def _leans_on_unshown_wheels(self, now_s: float, wheel_mu: Sequence[float]) -> bool:
         """Whether μ_max depends on the peaks of wheels whose data have not shown them lately.

@@ -16,6 +16,7 @@ LOW_CONFIDENCE = "confidence below the VALID threshold"
 BELOW_STOP_FLOOR = "μ_max below the grip the car used this stop"
 MISFIT = "the static model misfits this tyre (changes of road too often)"
 UNSHOWN_WHEELS = "μ_max leans on wheels that have not shown their peak"
+UNSAMPLED_SIDE = "μ_max leans on a side of the car with no usable sample"
 FEW_SAMPLES = "too few usable samples"
 BODY_SUM = "no peak shown in the car's total force"
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from frictiond import not_valid
 from frictiond import tyre_model as tm
 from frictiond.baseline_rls import BurckhardtRLSEstimator, burckhardt_peak
 from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
@@ -657,6 +658,38 @@ def test_split_mu_is_valid_only_once_both_sides_show_their_peaks(grippy_side_at_
         assert max(abs(m - truth) / truth for m, truth in valid[len(valid) // 2:]) < 0.15
     else:
         assert valid == []
+
+
+def test_the_icy_sides_spin_up_after_a_split_mu_stop_is_not_the_cars_mu_max(monkeypatch):
+    """The campaign's development stop 20994: split μ (wet cobblestone and ice), a car sending only
+    its master-cylinder pressure. The pedal released, only the icy side's wheels spin back up from
+    deep slip, and the window holds their samples alone; the fit couples the other side to them,
+    so μ_max read the ice's for the whole car: ten VALID outputs 75 % low. Not VALID: a side of the
+    car without samples."""
+    from frictiond.campaign.draw import draw_stop
+    from frictiond.campaign.score import estimator_scores
+    from frictiond.campaign.simulate import simulate_stop
+    from frictiond.estimate_confidence import EstimateConfidence
+    from frictiond.pipeline import Pipeline
+
+    stop = simulate_stop(draw_stop(20994))
+
+    def run_stop():
+        pipeline = Pipeline(stop.config("lugre-tr"))
+        estimates, reasons = [], set()
+
+        def keep(estimate, sample):
+            estimates.append(estimate)
+            reasons.add(pipeline.not_valid_reason)
+        pipeline.on_estimate = keep
+        for frame in stop.frames:
+            pipeline.process(frame)
+        return estimator_scores(estimates, stop.truth), reasons
+
+    scores, reasons = run_stop()
+    assert not_valid.UNSAMPLED_SIDE in reasons and scores["false_valid"] == 0
+    monkeypatch.setattr(EstimateConfidence, "_a_side_unsampled", lambda self: False)
+    assert run_stop()[0]["false_valid"] > 0
 
 
 def test_a_slip_controller_holding_its_target_below_a_far_peak_gives_no_valid():

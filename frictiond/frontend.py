@@ -85,7 +85,7 @@ class FrontEndOptions:
     # `released_min_slip` up, past a low-μ road's peak, where the curve is flat in slip: nearer
     # the peak the spin-up sweeps the curve's steep side faster than the tyre's force follows
     # (its relaxation), and the samples read above the static curve (10 % of the peak over a
-    # band of slips in the built-in `ice_fast` scenario, holding its first VALID back 0.9 s).
+    # band of slips in the built-in `ice_fast` scenario, converging 0.9 s later with them).
     released_wheel_s: float = 1.0
     released_min_slip: float = 0.1
     stale_periods: float = 3.0            # an input older than this many periods is stale

@@ -1373,7 +1373,8 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
         /* FrontEnd._torqued_by_brakes */
         if (braked[i])
             s.braked_time[i] = t_c;
-        const int torqued = braked[i] || (t_c - s.braked_time[i] <= k[K_RELEASED_S] && slip >= k[K_RELEASED_MIN_SLIP]);
+        const double since = t_c - s.braked_time[i];
+        const int torqued = braked[i] || (0.0 <= since && since <= k[K_RELEASED_S] && slip >= k[K_RELEASED_MIN_SLIP]);
         const int ok = speed >= k[K_MIN_SPEED] && fabs(slip) <= k[K_MAX_SLIP]
                        && (torqued || (has_drive && fabs(drive[i]) > 20.0)) && load > 50.0 && !glitch && !stuck[i]
                        && !dead[i] && isfinite(mu) && s.model_holds && !s.released;

@@ -180,14 +180,16 @@ class SamplePhysics:
 
     def _torqued_by_brakes(self, t_c: float, braked: list[bool], slips: list[float]) -> list[bool]:
         """Which wheels the brakes torque now or turned into the slip they spin back up from: braked,
-        or released within `released_wheel_s` and still slipping `released_min_slip` or more."""
+        or released within `released_wheel_s` and still slipping `released_min_slip` or more (not
+        across a clock stepped back: the braking then is not known to be this stop's)."""
         opts = self.options
         last = self._braked_time_s
         torqued = []
         for i in range(4):
             if braked[i]:
                 last[i] = t_c
-            torqued.append(braked[i] or (t_c - last[i] <= opts.released_wheel_s and slips[i] >= opts.released_min_slip))
+            since = t_c - last[i]
+            torqued.append(braked[i] or (0.0 <= since <= opts.released_wheel_s and slips[i] >= opts.released_min_slip))
         return torqued
 
     def _usable(self, speed: float, glitch: bool, slips: list[float], torqued: list[bool], drive: list[float],

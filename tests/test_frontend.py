@@ -417,6 +417,16 @@ def test_a_released_wheel_spinning_back_up_measures_its_tyre_by_its_acceleration
     assert options.released_wheel_s < 1.9 - 0.55
 
 
+def test_a_wheel_released_before_a_clock_stepped_back_is_not_taken_as_released():
+    fe = make()
+    slipping = [0.3] * 4
+    assert fe._torqued_by_brakes(100.0, [True] * 4, slipping) == [True] * 4
+    assert fe._torqued_by_brakes(100.5, [False] * 4, slipping) == [True] * 4
+    assert fe._torqued_by_brakes(40.0, [False] * 4, slipping) == [False] * 4   # (the clock stepped back)
+    assert fe._torqued_by_brakes(101.0, [False] * 4, [0.3, 0.05, 0.3, 0.3]) == [True, False, True, True]
+    assert fe._torqued_by_brakes(101.2, [False] * 4, slipping) == [False] * 4   # (released 1.2 s ago)
+
+
 def test_brake_torque_is_filtered_like_the_wheel_acceleration():
     """ABS-like pressure swings with a constant road force (ice: the brake torque is mostly spent
     on the wheel's inertia). The derivative filter smooths ω̇ over its window; the brake torque it

@@ -2,8 +2,8 @@
 
 `StopFit` is a part of `LugreTrustRegionEstimator` (its options, state and hold are the
 estimator's): `update` follows when the brakes were last applied (`_follow_braking`), keeps each
-fit it reports (`_kept_as_stop_fit`), and where there is neither a fit nor a fit to restate, gives
-that one (`_starved`). A detected change of road (`road_change`) and a clock step forget it.
+fit it reports (`_kept_as_stop_fit`), and where there is neither a fit nor a fit to restate (nor
+a body sum published), gives that one (`_starved`). A detected change of road (`road_change`) and a clock step forget it.
 """
 from __future__ import annotations
 
@@ -29,8 +29,9 @@ class StopFit:
         return estimate
 
     def _starved(self, now_s: float, speed: float) -> FrictionEstimate:
-        """A cycle with too few samples in the window to fit, nothing VALID standing, the brakes
-        applied within `window_s`: this stop's last fit, CONVERGING. The wheels ran deep into slip
+        """A cycle with too few samples in the window to fit (or, below `peak_evidence_min_speed`,
+        a body sum not published), nothing VALID standing, the brakes applied within `window_s`:
+        this stop's last fit, CONVERGING. The wheels ran deep into slip
         and their samples left the window (a threshold ABS dwelling past the peak, a car whose
         wheel torques are unknown while its body sum refills). The contract's NOT_EXCITED says no
         slip excursion was seen yet, and its MuMax, the nominal dry road's peak, was off by a

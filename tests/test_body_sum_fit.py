@@ -187,11 +187,11 @@ def test_rows_a_fit_cannot_take_are_left_out():
     assert fit.result(2.0, 20.0) is None
 
 
-def body_samples(curve, slips_of, seconds=2.5, torques_unknown=True, noise=0.01, seed=5, speed=20.0):
+def body_samples(curve, slips_of, seconds=2.5, torques_unknown=True, noise=0.01, seed=5, start_speed=20.0):
     """Samples of a car whose wheels' μ the front end could not measure (`usable` all False)."""
     out = []
     for t, speed, slips, loads, body, lateral in rows([curve] * 4, slips_of, seconds=seconds, noise=noise, seed=seed,
-                                                      speed=speed):
+                                                      speed=start_speed):
         out.append(PhysicalSample(time_s=t, speed_mps=speed, slip=slips, mu_used=(math.nan,) * 4, normal_force_n=loads,
                                   tyre_force_n=(0.0,) * 4, usable=(False,) * 4, braking=True, lateral_mu=lateral,
                                   body_force_mu=body, wheel_torques_unknown=torques_unknown))
@@ -251,7 +251,7 @@ def test_a_stop_ending_without_valid_keeps_the_body_sums_last_fit():
     (NOT_EXCITED: no slip excursion seen), which flickered in between fits before."""
     _, slip = burckhardt_peak(DRY)
     estimator = LugreTrustRegionEstimator()
-    samples = body_samples(DRY, lambda t: np.full(4, 0.6 * slip), speed=8.0)   # (5 m/s at 1 s, 0.5 at 2.5 s)
+    samples = body_samples(DRY, lambda t: np.full(4, 0.6 * slip), start_speed=8.0)   # (5 m/s at 1 s, 0.5 at 2.5 s)
     estimates = [estimator.update(s) for s in samples]
     moving = [e for e, s in zip(estimates, samples) if s.speed_mps >= estimator.options.peak_evidence_min_speed]
     ending = [e for e, s in zip(estimates, samples) if s.speed_mps < estimator.options.peak_evidence_min_speed]

@@ -115,6 +115,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--radius-scale", type=float, default=None, metavar="P", help="all four wheels' true "
                         "rolling radius off the configured one by one share drawn within ±P (a radius taken "
                         "from the tyre's size, not measured rolling; default: none off)")
+    parser.add_argument("--averaged-wheel-speeds", action="store_true", help="every wheel speed the mean over "
+                        "its frame period before the frame, as an ECU counting a toothed ring's edges sends it "
+                        "(default: the speed at the frame's instant)")
     parser.add_argument("--save", default=None, help="per-stop rows to .json or .parquet")
     parser.add_argument("--worst", type=int, default=15)
     parser.add_argument("--reproduce", type=int, default=None, metavar="SEED", help="run one stop and print its scores")
@@ -124,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         stress = Stress(args.clean_sensors, args.pre_roll, args.grade, args.payload, args.accel_offset,
                         args.cruise_lift, args.tyre_model, args.rear_select_low, args.tyre_radii,
-                        args.radius_scale)
+                        args.radius_scale, args.averaged_wheel_speeds)
     except ValueError as exc:
         parser.error(str(exc).replace("pre_roll_s", "--pre-roll").replace("payload_kg", "--payload")
                      .replace("accel_offset_mps2", "--accel-offset").replace("grade", "--grade")

@@ -681,3 +681,32 @@ def test_a_radius_wrong_on_all_four_tyres_scales_every_wheel_alike():
     stress = Stress(radius_scale=0.03)
     assert " --radius-scale 0.03 " in reproduce_command({"seed": 3}, None, stress) + " "
     assert stress.describe() == ", all four radii within ±0.03 of the configured together"
+
+
+def test_averaged_wheel_speeds_are_the_mean_over_each_frame_period():
+    # `--averaged-wheel-speeds`: an ECU counting a toothed ring's edges sends the mean speed of its
+    # frame period, not the instant's. On a trace whose ω is a known function of time, each value
+    # is the integral of ω over the period before the frame, over the period.
+    from types import SimpleNamespace
+
+    from frictiond.campaign.sensors import _omega_at
+    drawn = draw_stop(5)
+    averaged = draw_stop(5, averaged_wheel_speeds=True)
+    assert drawn.sensors.wheel_average_s == 0.0
+    assert averaged.sensors.wheel_average_s == pytest.approx(1.0 / drawn.sensors.wheel_hz)
+    assert dataclasses.replace(averaged, sensors=drawn.sensors) == drawn
+    t = np.arange(0.0, 1.0, 0.001)
+    omega = np.column_stack([50.0 + 30.0 * np.sin(2.0 * np.pi * f * t) for f in (1.0, 2.0, 3.0, 4.0)])
+    trace = SimpleNamespace(t=t, omega=omega)
+    times = np.array([0.105, 0.4, 0.77])
+    w = averaged.sensors.wheel_average_s
+    got = _omega_at(averaged.sensors, trace, times)
+    for j, f in enumerate((1.0, 2.0, 3.0, 4.0)):
+        integral = 50.0 * w - 30.0 / (2.0 * np.pi * f) * (np.cos(2.0 * np.pi * f * times) - np.cos(2.0 * np.pi * f * (times - w)))
+        assert got[:, j] == pytest.approx(integral / w, abs=2e-3)
+    instant = _omega_at(drawn.sensors, trace, times)
+    assert instant == pytest.approx(omega[np.rint(times / 0.001).astype(int)], abs=1e-9)
+    assert np.max(np.abs(got - instant)) > 1.0     # (a period of a 4 Hz swing moves ω by several rad/s)
+    stress = Stress(averaged_wheel_speeds=True)
+    assert " --averaged-wheel-speeds " in reproduce_command({"seed": 3}, None, stress) + " "
+    assert stress.describe() == ", wheel speeds averaged over their frame period"

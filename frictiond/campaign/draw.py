@@ -330,7 +330,9 @@ class Stress:
     wheel's true rolling radius off the configured one by a share drawn within ± this, each wheel
     its own (worn, soft or mixed tyres; drawn: none off). `radius_scale`: all four true radii off the
     configured one by one share drawn within ± this (a radius configured from the tyre's size, not
-    as measured rolling; with `tyre_radii`, the two multiply)."""
+    as measured rolling; with `tyre_radii`, the two multiply). `averaged_wheel_speeds`: every wheel
+    speed the mean over its frame period before the frame (`SensorSpec.wheel_average_s`), as an ECU
+    counting a toothed ring's edges sends it, not the speed at the frame's instant."""
 
     clean_sensors: bool = False
     pre_roll_s: float | None = None
@@ -342,6 +344,7 @@ class Stress:
     rear_select_low: bool = False
     tyre_radii: float | None = None
     radius_scale: float | None = None
+    averaged_wheel_speeds: bool = False
 
     def __post_init__(self) -> None:
         if self.pre_roll_s is not None and not self.pre_roll_s >= 0.0:
@@ -388,6 +391,8 @@ class Stress:
                                                                                              self.radius_scale)
             factors = tuple(float(f * common) for f in spec.car.radius_factors)
             spec = replace(spec, car=replace(spec.car, radius_factors=factors))
+        if self.averaged_wheel_speeds:
+            spec = replace(spec, sensors=replace(spec.sensors, wheel_average_s=1.0 / spec.sensors.wheel_hz))
         return spec
 
     def flags(self) -> str:
@@ -401,7 +406,8 @@ class Stress:
                         f" --tyre-model {self.tyre_model}" if self.tyre_model is not None else "",
                         " --rear-select-low" if self.rear_select_low else "",
                         f" --tyre-radii {self.tyre_radii:g}" if self.tyre_radii is not None else "",
-                        f" --radius-scale {self.radius_scale:g}" if self.radius_scale is not None else ""])
+                        f" --radius-scale {self.radius_scale:g}" if self.radius_scale is not None else "",
+                        " --averaged-wheel-speeds" if self.averaged_wheel_speeds else ""])
 
     def describe(self) -> str:
         """These settings for a report's title (", clean sensors, on a grade of 0.04", or "")."""
@@ -418,7 +424,8 @@ class Stress:
                         f", tyre radii within ±{self.tyre_radii:g} of the configured"
                         if self.tyre_radii is not None else "",
                         f", all four radii within ±{self.radius_scale:g} of the configured together"
-                        if self.radius_scale is not None else ""])
+                        if self.radius_scale is not None else "",
+                        ", wheel speeds averaged over their frame period" if self.averaged_wheel_speeds else ""])
 
 
 def draw_stop(seed: int, family: str | None = None, stress: Stress | None = None, **settings: Any) -> StopSpec:

@@ -49,6 +49,10 @@ class SensorSpec:
     # whether the DBC gives its messages' cycle times (GenMsgCycleTime); without, frictiond
     # measures them from the first frames
     cycle_times_in_dbc: bool = True
+    # how long each wheel speed is averaged over before the frame that sends it (0: its value at
+    # the frame's instant); an ECU that counts a toothed ring's edges over its frame period sends
+    # the mean speed of that period, half a period late (the stress run `Stress.averaged_wheel_speeds`)
+    wheel_average_s: float = 0.0
 
 
 class BusEvent(NamedTuple):
@@ -207,10 +211,24 @@ def _wheel_speeds(spec: SensorSpec, trace: Any, times: np.ndarray, radius_m: flo
                   rng: np.random.Generator) -> np.ndarray:
     """The four wheel speeds at `times` as a wheel-speed ECU sends them, in rad/s: ground speed in
     km/h over the configured radius, noisy and quantised."""
-    kmh = np.column_stack([np.interp(times, trace.t, trace.omega[:, i]) for i in range(4)]) * radius_m * 3.6
+    kmh = _omega_at(spec, trace, times) * radius_m * 3.6
     kmh += rng.normal(0.0, spec.wheel_noise_kmh, kmh.shape)
     kmh = np.maximum(np.round(kmh / spec.wheel_resolution_kmh) * spec.wheel_resolution_kmh, 0.0)
     return kmh / 3.6 / radius_m    # canonical unit; the DBC factor makes the encoding exact
+
+
+def _omega_at(spec: SensorSpec, trace: Any, times: np.ndarray) -> np.ndarray:
+    """The four wheels' ω at `times`: the instant's, or the mean over the `wheel_average_s` before
+    each (the wheel's angle turned over that window, over the window)."""
+    t = trace.t
+    if spec.wheel_average_s <= 0.0:
+        return np.column_stack([np.interp(times, t, trace.omega[:, i]) for i in range(4)])
+    steps = 0.5 * (trace.omega[1:] + trace.omega[:-1]) * np.diff(t)[:, None]
+    angle = np.vstack([np.zeros((1, 4)), np.cumsum(steps, axis=0)])
+    start = np.maximum(times - spec.wheel_average_s, t[0])
+    width = np.maximum(times - start, 1e-9)
+    return np.column_stack([(np.interp(times, t, angle[:, i]) - np.interp(start, t, angle[:, i])) / width
+                            for i in range(4)])
 
 
 def _rows(names: list[str], values: np.ndarray) -> list[dict[str, float]]:

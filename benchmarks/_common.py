@@ -25,14 +25,13 @@ def braking_samples(scenarios: Sequence[str] = ("dry", "wet", "snow", "split_mu"
 
 def pipeline_samples(pipeline: Pipeline, frames) -> list:
     """The PhysicalSamples `pipeline` updates its estimator with over `frames`, in order."""
-    samples = []
-    previous = None
+    samples: list = []
+    # (each update's sample once: one frame may release several, `trigger_hold`, and a held
+    # estimate repeats the last sample)
+    pipeline.on_estimate = lambda _e, s: samples.append(s) if s is not None and (not samples or s is not samples[-1]) else None
     for frame in frames:
-        # pipeline.last_sample is the sample the estimator was just updated with (it stays
-        # set while the pipeline holds an estimate: record each one once).
-        if pipeline.process(frame) and pipeline.last_sample is not None and pipeline.last_sample is not previous:
-            previous = pipeline.last_sample
-            samples.append(previous)
+        pipeline.process(frame)
+    pipeline.flush()
     return samples
 
 

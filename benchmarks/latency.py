@@ -1,9 +1,11 @@
-"""Latency inside the daemon's own loop: a WHEEL_SPEEDS frame handed over by the bus → its output
-frames handed to the bus, for `frictiond run`'s Daemon on python-can's virtual bus.
+"""Latency inside the daemon's own loop: a frame handed over by the bus → the output frames it
+releases handed to the bus, for `frictiond run`'s Daemon on python-can's virtual bus. (A
+WHEEL_SPEEDS frame's update runs when the pressures and the acceleration have been received up
+to its time, `trigger_hold`: on the frame that brings them, or on the wheel-speed frame itself.)
 
 Simulated ABS stops are played onto the bus at real-time pace (so the loop is idle between
-frames as on a car), and every trigger frame's handling time is recorded, with the part spent in
-`bus.send`. As a floor, the same measurement for a loop that only decodes the frame with the
+frames as on a car), and the handling time of every frame that releases an update is recorded,
+with the part spent in `bus.send`. As a floor, the same measurement for a loop that only decodes the frame with the
 codec. In the same run: the same frames through a Pipeline back to back (the work without the
 idle gaps and the bus) and at the same pace (sleeping in between, no bus), and how much slower
 this machine runs a fixed workload right after sleeping than back to back.
@@ -30,7 +32,7 @@ from frictiond.sim_frames import simulate_frames  # noqa: E402
 
 
 class TimedDaemon(Daemon):
-    """The real daemon, with a stopwatch around the handling of each trigger frame."""
+    """The real daemon, with a stopwatch around the handling of each frame that releases an update."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -38,19 +40,22 @@ class TimedDaemon(Daemon):
         self.sending: list[float] = []
         self.decode_only: list[float] = []
         self._send_s = 0.0
+        self._sent = 0
 
     def _send(self, frames):  # type: ignore[override]
         t0 = time.perf_counter()
         super()._send(frames)
         self._send_s += time.perf_counter() - t0
+        self._sent += len(frames)
 
     def _handle(self, msg):  # type: ignore[override]
-        if msg.arbitration_id != self.trigger_id:
-            return super()._handle(msg)
-        self._send_s = 0.0
+        self._send_s, self._sent = 0.0, 0
         t0 = time.perf_counter()
         super()._handle(msg)
-        self.latencies.append(time.perf_counter() - t0)
+        elapsed = time.perf_counter() - t0
+        if not self._sent:
+            return
+        self.latencies.append(elapsed)
         self.sending.append(self._send_s)
         # floor: what merely decoding this frame costs
         from frictiond.busio import message_to_frame
@@ -87,10 +92,10 @@ def idle_penalty(period_s: float, runs: int = 300) -> tuple[float, float]:
 
 
 def pipeline_alone(config, drives, pace: float | None) -> list[float]:
-    """The pipeline's handling of each trigger frame of the same drives (µs), without the daemon
-    and the bus: back to back (pace None), or at the drive's pace, sleeping in between."""
+    """The pipeline's handling of each frame that releases an estimator update (a wheel-speed
+    frame, or the partner frame it waited for: `trigger_hold`) of the same drives (µs), without
+    the daemon and the bus: back to back (pace None), or at the drive's pace, sleeping in between."""
     pipeline = Pipeline(config)
-    trigger = pipeline.input_codec.trigger_id
     times = []
     for frames in drives:
         base, start = frames[0].time_s, time.perf_counter()
@@ -100,8 +105,7 @@ def pipeline_alone(config, drives, pace: float | None) -> list[float]:
                 if delay > 0:
                     time.sleep(delay)
             t0 = time.perf_counter()
-            pipeline.process(f)
-            if f.can_id == trigger:
+            if pipeline.process(f):
                 times.append((time.perf_counter() - t0) * 1e6)
     return times
 
@@ -140,16 +144,16 @@ def main(argv=None) -> int:
     lat = [v * 1e6 for v in daemon.latencies]
     send = [v * 1e6 for v in daemon.sending]
     dec = [v * 1e6 for v in daemon.decode_only]
-    print(f"trigger frames handled: {len(lat)}")
+    print(f"frames releasing an update handled: {len(lat)}")
     print(f"arrival → outputs sent: median {statistics.median(lat):7.1f} µs  p99 {percentile(lat, 99):7.1f} µs  "
           f"max {max(lat):7.1f} µs")
     print(f"  of which bus.send of the outputs: median {statistics.median(send):7.1f} µs  p99 {percentile(send, 99):7.1f} µs")
     print(f"floor (decode only):    median {statistics.median(dec):7.1f} µs  p99 {percentile(dec, 99):7.1f} µs")
     print(f"ratio median latency / decode: {statistics.median(lat) / statistics.median(dec):.1f}x; "
           f"p99 is {percentile(lat, 99) / 10_000 * 100:.1f} % of the 10 ms bus period")
-    print(f"same trigger frames back to back (Pipeline.process, no bus): median {statistics.median(warm):7.1f} µs  "
+    print(f"same frames back to back (Pipeline.process, no bus): median {statistics.median(warm):7.1f} µs  "
           f"p99 {percentile(warm, 99):7.1f} µs")
-    print(f"same trigger frames at the same pace (Pipeline.process, no bus): median {statistics.median(paced):7.1f} µs  "
+    print(f"same frames at the same pace (Pipeline.process, no bus): median {statistics.median(paced):7.1f} µs  "
           f"p99 {percentile(paced, 99):7.1f} µs")
     print(f"this machine after sleeping between frames: a fixed workload runs {penalty[0]:.2f}x slower "
           f"(median), {penalty[1]:.2f}x (p99) than back to back")

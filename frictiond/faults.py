@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import random
-from typing import Callable, Iterable, NamedTuple
+from typing import Callable, Iterable, Iterator, NamedTuple
 
 from .codec import DecodeFailure, InputCodec
 from .frames import Frame
@@ -279,12 +279,15 @@ def replay_on_bus(config, frames: Iterable[Frame], tick_s: float = 0.01, pipelin
     estimates: list[BusEstimate] = []
     bad: list[Frame] = []
     last_tick = -math.inf
-    for frame in frames:
-        out = pipeline.process(frame)
-        t = frame.time_s
-        if math.isfinite(t) and (t - last_tick >= tick_s or t < last_tick):
-            last_tick = t
-            out = out + pipeline.tick(t)
+    for frame in _then_end(frames):
+        if frame is None:   # (the end: what the pipeline still held)
+            out = pipeline.flush()
+        else:
+            out = pipeline.process(frame)
+            t = frame.time_s
+            if math.isfinite(t) and (t - last_tick >= tick_s or t < last_tick):
+                last_tick = t
+                out = out + pipeline.tick(t)
         for f in out:
             values = codec.decode_output(f)
             numbers = [v for k, v in values.items() if isinstance(v, (int, float)) and k != "time_s"]
@@ -300,3 +303,9 @@ def replay_on_bus(config, frames: Iterable[Frame], tick_s: float = 0.01, pipelin
                 continue
             estimates.append(BusEstimate(f.time_s, status, float(values["MuMax"]), float(values["Confidence"])))
     return pipeline, estimates, bad
+
+
+def _then_end(frames: Iterable[Frame]) -> Iterator[Frame | None]:
+    """The frames, then None: where `replay_on_bus` flushes the pipeline's held inputs."""
+    yield from frames
+    yield None

@@ -95,6 +95,9 @@ class FrontEndOptions:
     spike_threshold: float = 2.0
     max_gap: float = 0.25                 # s between wheel-speed frames before the filter restarts
     reorder_window: float = 0.05          # s; an older wheel-speed frame within this is skipped, not a restart
+    # A wheel-speed frame's sample waits for the pressures and the acceleration to be received up
+    # to its time, at most this many of their longest period (`trigger_hold`; 0: it does not wait)
+    input_wait_periods: float = 2.0
     speed_gain_up: float = 0.3            # observer gain when wheels read faster than the estimate
     speed_gain_down: float = 0.02         # ... and when even the fastest wheel reads too slow
     # Under braking two wheels faster than the estimate pull it up by no more than this (m/s²: the

@@ -11,13 +11,14 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 from . import input_quality
-from .codec import DecodeFailure, InputCodec, InputMessage, OutputCodec, load_databases
+from .codec import DecodedInput, DecodeFailure, InputCodec, InputMessage, OutputCodec, load_databases
 from .config import Config
 from .cycle_times import CycleTimeProbe
 from .frames import Frame
 from .frontend import PRESSURE_NAMES, FrontEnd, FrontEndResult, make_front_end
 from .relaxation import RelaxationCompensator
 from .samples import FrictionEstimate, PhysicalSample, Status
+from .trigger_hold import TriggerHold
 from .wheel_speed_join import WheelSpeedJoin
 
 _new_tuple = tuple.__new__
@@ -107,6 +108,8 @@ class Pipeline:
         self._last_valid: FrictionEstimate | None = None
         self._last_output_s = -math.inf
         self._last_trigger_s = -math.inf
+        # The frame times of the wheel-speed inputs `trigger_hold` holds, oldest first.
+        self._trigger_stamps: deque[float] = deque()
         self._wheel_divider = max(1, int(config.output.wheel_divider))
         self._recent_faults: deque[float] = deque()
         self._first_update_s: float | None = None
@@ -126,6 +129,16 @@ class Pipeline:
         # A car that sends only its master-cylinder pressure maps it to all four wheels.
         pressure_sources = {(config.signals[n].message, config.signals[n].signal)
                             for n in PRESSURE_NAMES if n in config.signals}
+        # Each wheel-speed input held until the pressures and the acceleration its sample is
+        # matched with have been received up to its time (`trigger_hold`).
+        matched = set(PRESSURE_NAMES) | {"accel_long"}
+        partner_periods = [m.period_s or config.frontend.default_period for m in messages
+                           if m.name != trigger and matched & set(m.signals)]
+        held = self.trigger_hold.flush() if hasattr(self, "trigger_hold") else []
+        self.trigger_hold = TriggerHold(trigger, [m.name for m in messages if m.name != trigger and matched & set(m.signals)],
+                                        config.frontend.input_wait_periods * max(partner_periods, default=0.0))
+        for item in held:   # (rebuilt at the measured cycle times: they wait for the partners again)
+            self.trigger_hold.push(item)
         before: FrontEnd | None = getattr(self, "front_end", None)
         self.front_end: FrontEnd = make_front_end(config.vehicle, config.frontend, messages, trigger,
                                                   pressures_are_master=len(pressure_sources) == 1)
@@ -173,19 +186,29 @@ class Pipeline:
         stats.input_frames += 1
         if self._cycle_probe is not None:
             self._measure_cycle(decoded.message, decoded.time_s)
-        if self.wheel_join is None:
-            result = self.front_end.push(decoded.time_s, decoded.message, decoded.values)
-            if result is None:
-                return []
-            self._last_trigger_s = frame.time_s
-            return self._update(frame.time_s, result)
         out: list[Frame] = []
-        for part in self.wheel_join.push(decoded):
-            result = self.front_end.push(part.time_s, part.message, part.values)
-            if result is not None:
+        for part in (self.wheel_join.push(decoded) if self.wheel_join is not None else (decoded,)):
+            if part.message == self.trigger_message:
                 self._last_trigger_s = frame.time_s
-                out.extend(self._update(frame.time_s, result))
+                self._trigger_stamps.append(frame.time_s)
+            for item in self.trigger_hold.push(part):
+                out.extend(self._feed(item))
         return out
+
+    def flush(self) -> list[Frame]:
+        """The end of the input (a log's last frame): the wheel-speed inputs still waiting for
+        their partners' frames (`trigger_hold`) go to the front end as they are."""
+        out: list[Frame] = []
+        for item in self.trigger_hold.flush():
+            out.extend(self._feed(item))
+        return out
+
+    def _feed(self, item: DecodedInput) -> list[Frame]:
+        """One decoded input to the front end; the output frames of the update a wheel-speed
+        input causes, stamped with the time of the frame that brought it (can-contract.md)."""
+        stamp = self._trigger_stamps.popleft() if item.message == self.trigger_message else item.time_s
+        result = self.front_end.push(item.time_s, item.message, item.values)
+        return [] if result is None else self._update(stamp, result)
 
     def count_unrelated(self, frames: int) -> None:
         """Count standard-ID data frames of other IDs that a reader dropped before `process`."""
@@ -202,7 +225,14 @@ class Pipeline:
                                "extended IDs" if frame.is_extended else "unrelated IDs"] += 1
 
     def tick(self, now_s: float) -> list[Frame]:
-        """Call when no trigger frame has arrived for a while: reports a stale trigger input."""
+        """Call when no frame has arrived for a while: the wheel-speed inputs that have waited
+        their longest for their partners go on (`trigger_hold`), and a stale trigger input is
+        reported."""
+        released: list[Frame] = []
+        for item in self.trigger_hold.due(now_s):
+            released.extend(self._feed(item))
+        if released:
+            return released
         period = self.front_end.period_of(self.trigger_message)
         limit = self.config.frontend.stale_periods * period
         if now_s - self._last_trigger_s <= limit or now_s - self._last_output_s < period:

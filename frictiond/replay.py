@@ -162,6 +162,10 @@ def replay_frames(
         if out and sink is not None:
             for f in out:
                 sink.write(f)
+    out = pipeline.flush()   # (the log's last wheel-speed frames, still waiting for their partners)
+    if out and sink is not None:
+        for f in out:
+            sink.write(f)
     return ReplaySummary(
         pipeline.stats, first, last, pipeline.last_estimate, pipeline.front_end.period_of(pipeline.trigger_message),
         pipeline.input_codec.counter_jumps, pipeline.front_end.skipped_triggers,
@@ -200,6 +204,7 @@ def estimates_of(config: Any, frames: Iterable[Frame]) -> tuple[Pipeline, list[F
     process = pipeline.process
     for frame in frames:
         process(frame)
+    pipeline.flush()
     return pipeline, estimates
 
 

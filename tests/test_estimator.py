@@ -918,11 +918,13 @@ def test_a_magic_formula_peak_swept_within_the_filter_is_no_confident_peak():
     # sample at the top is a mean over the slips swept, so the samples cannot show a top that
     # sharp. The fitted static LuGre curve is rounder there and put the peak low: 19 VALID
     # outputs were more than 20 % low. Counting the mean's shortfall at a real tyre's curvature
-    # (twice the fitted curve's) keeps them out of VALID, and the stop stays VALID where it is right.
+    # (twice the fitted curve's) keeps them out of VALID, and the stop stays VALID where it is right
+    # (21 outputs 1-10 % low since each wheel-speed sample waits for its pressures, `trigger_hold`;
+    # 58 outputs 2-17 % low before).
     stop, estimates = campaign_stop_estimates(2386)
     truth = {round(r["time_s"], 2): r["mu_max"] for r in stop.truth}
     valid = [e for e in estimates if e.status == Status.VALID]
-    assert len(valid) > 50
+    assert len(valid) > 15
     assert not [e for e in valid if abs(e.mu_max - truth[round(e.time_s, 2)]) > 0.2 * truth[round(e.time_s, 2)]]
 
 

@@ -1136,7 +1136,7 @@ def test_an_accelerometer_beyond_its_tolerance_is_told_by_the_config_not_guessed
     # mounted 2.3° tilted), beyond the 0.3 the body equation allows by default: on 258 (a slip
     # controller on snow, the torque steady, 10 % of load the config does not know) coasting's
     # offset and the fit are held within 0.3 and the gain takes the rest: no VALID output within
-    # 10 %, several more than 20 % off. Told the sensor's tolerance, the front end takes the
+    # 10 %, most of them 15-20 % off. Told the sensor's tolerance, the front end takes the
     # offset coasting shows: both stops' VALID outputs are right, but for a few of 258's.
     import dataclasses
 
@@ -1161,7 +1161,7 @@ def test_an_accelerometer_beyond_its_tolerance_is_told_by_the_config_not_guessed
                 for e in estimates if e.status == Status.VALID]
 
     default = valid_errors(258, 0.3)
-    assert all(x > 0.1 for x in default) and sum(x > 0.2 for x in default) >= 5
+    assert all(x > 0.1 for x in default) and sum(x > 0.15 for x in default) >= 0.8 * len(default) > 20
     for seed, right_share in ((258, 0.6), (363, 0.9)):
         told = valid_errors(seed, 0.5)
         assert len(told) > 50 and sum(x <= 0.1 for x in told) >= right_share * len(told)

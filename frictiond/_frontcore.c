@@ -333,6 +333,83 @@ done:
     return out;
 }
 
+/* InputAlignment._matched_brake_rates: each of the first NW lookups' series slopes (linear
+ * between frames, 0 beyond them; each value less the floor, clipped at 0) averaged with the
+ * window's weights, times gains[i], into rates[i] where the series has two frames or more
+ * (have[i] = 1; else 0). 0, or -1 with an exception. */
+static int matched_slopes(PyObject *lookups, PyObject *o_times, PyObject *o_w, const double *gains, double *rates,
+                          int *have)
+{
+    double *times = NULL, *w = NULL, *ts = NULL, *vs = NULL;
+    Py_ssize_t nt;
+    int status = -1;
+    if (window_of(o_times, o_w, &times, &w, &nt) < 0)
+        goto out;
+    if (!PyTuple_Check(lookups) || PyTuple_GET_SIZE(lookups) < NW) {
+        PyErr_SetString(PyExc_ValueError, "matched_slopes: four pressure lookups");
+        goto out;
+    }
+    for (int i = 0; i < NW; i++) {
+        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *series, *name, *o_floor;
+        have[i] = 0;
+        if (lookup == Py_None)
+            continue;
+        if (!PyArg_ParseTuple(lookup, "O!OO:matched_slopes", &PyDict_Type, &series, &name, &o_floor))
+            goto out;
+        double floor_value = 0.0;
+        if (o_floor != Py_None && (floor_value = PyFloat_AsDouble(o_floor)) == -1.0 && PyErr_Occurred())
+            goto out;
+        PyObject *pair = PyDict_GetItemWithError(series, name);
+        if (!pair) {
+            if (PyErr_Occurred())
+                goto out;
+            continue;
+        }
+        if (!PyTuple_Check(pair) || PyTuple_GET_SIZE(pair) != 2) {
+            PyErr_SetString(PyExc_TypeError, "matched_slopes: a series is a (times, values) pair");
+            goto out;
+        }
+        Py_ssize_t ns, nv;
+        PyMem_Free(ts);
+        PyMem_Free(vs);
+        ts = vs = NULL;
+        if (!(ts = floats_of(PyTuple_GET_ITEM(pair, 0), &ns, "ts")) || !(vs = floats_of(PyTuple_GET_ITEM(pair, 1), &nv, "vs")))
+            goto out;
+        if (ns != nv) {
+            PyErr_SetString(PyExc_ValueError, "matched_slopes: ts and vs of one length");
+            goto out;
+        }
+        if (ns < 2)
+            continue;
+        const Py_ssize_t last = ns - 1;
+        Py_ssize_t k = last;
+        double total = 0.0;
+        for (Py_ssize_t j = nt - 1; j >= 0; j--) {   /* newest window time first, as the plan */
+            const double t = times[j];
+            if (t >= ts[last])
+                continue;
+            while (k > 0 && ts[k - 1] > t)
+                k--;
+            if (k == 0)
+                continue;
+            const double t0 = ts[k - 1], t1 = ts[k];
+            if (t1 > t0) {
+                const double a = vs[k - 1] - floor_value, b = vs[k] - floor_value;
+                total += w[j] * ((b > 0.0 ? b : 0.0) - (a > 0.0 ? a : 0.0)) / (t1 - t0);
+            }
+        }
+        rates[i] = gains[i] * total;
+        have[i] = 1;
+    }
+    status = 0;
+out:
+    PyMem_Free(times);
+    PyMem_Free(w);
+    PyMem_Free(ts);
+    PyMem_Free(vs);
+    return status;
+}
+
 /* MessageHistory.value_at for one signal: its (times, values) deques at time t; a new reference. */
 static PyObject *value_at(PyObject *pair, double t)
 {
@@ -1347,6 +1424,16 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     Py_XDECREF(matched);
     double rates[NW], inertia[NW];
     brake_torque_rates(&s, k, t_c, torques, rates);
+    if (o_weights != Py_None) {
+        /* (the rates at the sample's instant where the pressure series give them) */
+        double exact[NW];
+        int have[NW];
+        if (matched_slopes(lookups, o_times, o_weights, k + K_BRAKE_GAIN_FL, exact, have) < 0)
+            return NULL;
+        for (int i = 0; i < NW; i++)
+            if (have[i])
+                rates[i] = exact[i];
+    }
     for (int i = 0; i < NW; i++)
         inertia[i] = k[K_INERTIA] * torque_omega_dot[i];
     if (k[K_GAIN_CORRECTION] != 0.0 && !glitch)

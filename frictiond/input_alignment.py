@@ -113,6 +113,44 @@ class InputAlignment:
         return [veh.brake_gain(i) * self._matched(name, p, plans, pushout)
                 for i, (name, p) in enumerate(zip(PRESSURE_NAMES, pressures))]
 
+    def _matched_brake_rates(self) -> list[float | None]:
+        """Each wheel's matched brake torque's rate at the sample's instant: the pressure series'
+        slopes (linear between its frames, 0 beyond them) averaged over the derivative window with
+        the filter's weights, times the wheel's gain; None where the series has no two frames.
+
+        The rate the sensors' lag is compensated with (`_tyre_forces`) and learnt from
+        (`_learn_pressure_lag`). The matched torques' difference from the previous sample is the
+        rate half a wheel period earlier (5–10 ms), late by that much while an ABS dumps or builds
+        hundreds of bar per second. (`_frontcore.c`'s `matched_slopes`.)"""
+        weights = self._torque_weights
+        if weights is None:
+            return [None] * 4
+        pushout = self.vehicle.brake_pushout_pressure
+        times = list(self._wheel_times)
+        rates: list[float | None] = []
+        for i, name in enumerate(PRESSURE_NAMES):
+            history = self._source.get(name)
+            pair = history.series.get(name) if history is not None else None
+            if pair is None or len(pair[0]) < 2:
+                rates.append(None)
+                continue
+            ts, vs = pair
+            last = len(ts) - 1
+            total = 0.0
+            k = last
+            for t, w in zip(reversed(times), reversed(weights)):   # (newest first, as the plan)
+                if t >= ts[last]:
+                    continue            # held beyond the newest frame: no slope
+                while k > 0 and ts[k - 1] > t:
+                    k -= 1
+                if k == 0:
+                    continue            # before the oldest frame
+                t0, t1 = ts[k - 1], ts[k]
+                if t1 > t0:
+                    total += w * (max(0.0, vs[k] - pushout) - max(0.0, vs[k - 1] - pushout)) / (t1 - t0)
+            rates.append(self.vehicle.brake_gain(i) * total)
+        return rates
+
     def _matched_inputs(self, pressures: list[float], accel_long_raw: float) -> tuple[list[float], float]:
         """`_matched_brake_torques` and `_matched_value("accel_long", …)` (one compiled call when built)."""
         if self.core is None or self._torque_weights is None:

@@ -165,6 +165,8 @@ class SamplePhysics:
         veh = self.vehicle
         brake_torques, accel_long_matched = self._matched_inputs(pressures, accel_long_raw)
         brake_rates = self._brake_torque_rates(t_c, brake_torques)
+        # (the rates at the sample's instant where the pressure series give them)
+        brake_rates = [r if m is None else m for r, m in zip(brake_rates, self._matched_brake_rates())]
         torque_omega_dot = omega_dot if self._torque_omega_dot is None else self._torque_omega_dot
         inertia_torques = [veh.wheel_inertia * float(a) for a in torque_omega_dot]
         if self.options.brake_gain_correction and not glitch:

@@ -1017,10 +1017,14 @@ def test_a_change_of_road_under_the_front_axle_alone_costs_confidence(monkeypatc
         assert moving
         return moving
 
-    with_front = confidences(True, False)[-1]
-    without = confidences(False, False)[-1]
-    assert without >= 0.65          # (the premise: the pooled test alone sees nothing)
-    assert with_front <= without - 0.05
+    with_front = confidences(True, False)
+    without = confidences(False, False)
+    assert without[-1] >= 0.65          # (the premise: the pooled test alone sees nothing)
+    # (The pressures' lag compensated by their rate at the sample's instant, the fit follows the
+    # new road by 1.5 s and the front's residuals cost confidence only while the rear wheels'
+    # still disagree: up to 0.07 around 1.6 s, 0.05 at 1.81 s, nothing by 1.85 s.)
+    cost = [b - a for a, b in zip(with_front, without)]
+    assert min(cost) >= 0.0 and max(cost) >= 0.04
     assert max(confidences(False, True)) < LugreTROptions().keep_valid_confidence
 
 

@@ -170,3 +170,50 @@ def test_the_replay_summary_says_what_the_body_equation_learnt():
     # held at its tolerance's edge by a body that asks for more, the line says what that may mean
     fe._sensor_offset_mps2, fe._sensor_offset_doubt_mps2 = -0.3, 0.3
     assert "accel_offset_tolerance" in fe.body_equation_note()
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_the_lag_is_compensated_by_the_pressures_rate_at_the_sample_s_instant(compiled):
+    # The brake torques set against the derivative window's ω̇ are the pressures averaged over
+    # the window with the filter's weights; the lag is compensated by their rate at the sample's
+    # instant: the pressure frames' slopes averaged the same way, the time derivative of that
+    # average. The difference from the previous sample's average is the rate half a sample
+    # earlier: an ABS building at 2,000 bar/s, then dumping at 3,000, it lags each turn.
+    fe = FrontEnd(VEH, FrontEndOptions(), MESSAGES, {"WHEELS": 0.01, "ACCEL": 0.02, "PRESS": 0.02}, "WHEELS")
+    if not compiled:
+        fe.core = None
+
+    def pressure(t: float) -> float:
+        return 20.0 + 2000.0 * max(0.0, t - 0.3033) - 5000.0 * max(0.0, t - 0.3533)
+
+    omega = V0 * (1 - SLIP0) / VEH.wheel_radius
+    checked, late = 0, 0
+    previous = None
+    for k in range(45):
+        t = 0.01 * k
+        if k % 2 == 0:
+            fe.push(t + 0.002, "ACCEL", {"accel_long": -3.0, "accel_lat": 0.0, "yaw_rate": 0.0})
+            fe.push(t + 0.004, "PRESS", dict(zip(PRESSURE_NAMES, (pressure(t + 0.004),) * 4)))
+        fe.push(t + 0.01, "WHEELS", dict(zip(WHEEL_SPEED_NAMES, (omega,) * 4)))
+        if fe._torque_weights is None or len(fe._wheel_times) < fe.derivative_window:
+            continue
+        window = fe._wheel_times
+        rates = fe._matched_brake_rates()
+
+        def matched_at(shift: float) -> list[float]:
+            fe._wheel_times = [x + shift for x in window]
+            try:
+                return fe._matched_brake_torques([pressure(t)] * 4)
+            finally:
+                fe._wheel_times = window
+
+        h = 1e-5
+        ahead, behind, now = matched_at(h), matched_at(-h), matched_at(0.0)
+        for i in range(4):
+            assert rates[i] == pytest.approx((ahead[i] - behind[i]) / (2 * h), rel=1e-3, abs=1e-3 * VEH.brake_gain(i))
+        if previous is not None:
+            difference = (now[0] - previous[0]) / 0.01
+            late += abs(difference - rates[0]) > 0.2 * abs(rates[0]) + 1.0
+        previous = now
+        checked += 1
+    assert checked > 30 and late >= 4

@@ -164,7 +164,7 @@ class FrontEndOptions:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.max_slip < 1:
             raise ValueError(f"max_slip: must be in (0, 1), got {self.max_slip!r}")
-        for name in ("accel_bias_settle_s", "speed_correction_rate", "speed_correction_hold_s"):
+        for name in ("accel_bias_settle_s", "speed_correction_rate", "speed_correction_hold_s", "input_wait_periods"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name}: must be ≥ 0, got {getattr(self, name)!r}")
 

@@ -132,11 +132,10 @@ class Pipeline:
         # Each wheel-speed input held until the pressures and the acceleration its sample is
         # matched with have been received up to its time (`trigger_hold`).
         matched = set(PRESSURE_NAMES) | {"accel_long"}
-        partner_periods = [m.period_s or config.frontend.default_period for m in messages
-                           if m.name != trigger and matched & set(m.signals)]
+        awaited = [m for m in messages if m.name != trigger and matched & set(m.signals)]
+        longest = max((m.period_s or config.frontend.default_period for m in awaited), default=0.0)
         held = self.trigger_hold.flush() if hasattr(self, "trigger_hold") else []
-        self.trigger_hold = TriggerHold(trigger, [m.name for m in messages if m.name != trigger and matched & set(m.signals)],
-                                        config.frontend.input_wait_periods * max(partner_periods, default=0.0))
+        self.trigger_hold = TriggerHold(trigger, [m.name for m in awaited], config.frontend.input_wait_periods * longest)
         for item in held:   # (rebuilt at the measured cycle times: they wait for the partners again)
             self.trigger_hold.push(item)
         before: FrontEnd | None = getattr(self, "front_end", None)
@@ -206,7 +205,8 @@ class Pipeline:
     def _feed(self, item: DecodedInput) -> list[Frame]:
         """One decoded input to the front end; the output frames of the update a wheel-speed
         input causes, stamped with the time of the frame that brought it (can-contract.md)."""
-        stamp = self._trigger_stamps.popleft() if item.message == self.trigger_message else item.time_s
+        stamps = self._trigger_stamps
+        stamp = stamps.popleft() if item.message == self.trigger_message and stamps else item.time_s
         result = self.front_end.push(item.time_s, item.message, item.values)
         return [] if result is None else self._update(stamp, result)
 

@@ -111,3 +111,12 @@ def test_the_wheels_mu_is_read_against_the_pressures_of_the_window_s_end():
 
     at_arrival, held = rms_error(0.0), rms_error(2.0)
     assert held < 0.75 * at_arrival, (held, at_arrival)
+
+
+def test_a_negative_wait_is_refused_by_the_config():
+    import pytest
+
+    from frictiond.frontend import FrontEndOptions
+
+    with pytest.raises(ValueError, match="input_wait_periods"):
+        FrontEndOptions(input_wait_periods=-1.0).validate()

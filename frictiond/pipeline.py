@@ -131,11 +131,9 @@ class Pipeline:
                             for n in PRESSURE_NAMES if n in config.signals}
         # Each wheel-speed input held until the pressures and the acceleration its sample is
         # matched with have been received up to its time (`trigger_hold`).
-        matched = set(PRESSURE_NAMES) | {"accel_long"}
-        awaited = [m for m in messages if m.name != trigger and matched & set(m.signals)]
-        longest = max((m.period_s or config.frontend.default_period for m in awaited), default=0.0)
         held = self.trigger_hold.flush() if hasattr(self, "trigger_hold") else []
-        self.trigger_hold = TriggerHold(trigger, [m.name for m in awaited], config.frontend.input_wait_periods * longest)
+        self.trigger_hold = TriggerHold.for_messages(trigger, messages, config.frontend.input_wait_periods,
+                                                     config.frontend.default_period)
         for item in held:   # (rebuilt at the measured cycle times: they wait for the partners again)
             self.trigger_hold.push(item)
         before: FrontEnd | None = getattr(self, "front_end", None)

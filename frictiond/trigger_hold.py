@@ -21,7 +21,11 @@ from __future__ import annotations
 from collections import deque
 from typing import Iterable
 
-from .codec import DecodedInput
+from .codec import DecodedInput, InputMessage
+from .input_names import PRESSURE_NAMES
+
+# What the front end matches to the derivative window (`input_alignment`): the messages awaited.
+_MATCHED = frozenset(PRESSURE_NAMES) | {"accel_long"}
 
 
 class TriggerHold:
@@ -33,6 +37,15 @@ class TriggerHold:
         self.max_wait_s = max_wait_s
         self._newest: dict[str, float] = {}
         self._pending: deque[DecodedInput] = deque()
+
+    @classmethod
+    def for_messages(cls, trigger: str, messages: Iterable[InputMessage], wait_periods: float,
+                     default_period: float) -> "TriggerHold":
+        """The hold for these input messages: awaiting those that carry pressures or the
+        acceleration, at most `wait_periods` of the longest of their periods."""
+        awaited = [m for m in messages if m.name != trigger and _MATCHED & set(m.signals)]
+        longest = max((m.period_s or default_period for m in awaited), default=0.0)
+        return cls(trigger, [m.name for m in awaited], wait_periods * longest)
 
     @property
     def waiting(self) -> int:

@@ -175,9 +175,11 @@ out:
  * in the series (ts, vs) and held beyond its ends, as FrontEnd._matched with
  * input_alignment.interpolation_plan; with a floor, each series value v counts as max(0, v − floor). */
 /* FrontEnd._matched of one series (o_ts, o_vs) over the window's times and weights: *total
- * (each value less floor_value and clipped at 0 when has_floor). 0, or -1 with an exception. */
+ * (each value less floor_value and clipped at 0 when has_floor); with `slopes`, of the series'
+ * slopes instead (interpolation_plan(..., slopes=True): 0 beyond its ends and across a repeated
+ * time). 0, or -1 with an exception. */
 static int matched_sum(PyObject *o_ts, PyObject *o_vs, const double *times, const double *w, Py_ssize_t nt,
-                       int has_floor, double floor_value, double *total_out)
+                       int has_floor, double floor_value, int slopes, double *total_out)
 {
     Py_ssize_t ns, nv;
     double *ts = NULL, *vs = NULL, *coef = NULL;
@@ -211,16 +213,25 @@ static int matched_sum(PyObject *o_ts, PyObject *o_vs, const double *times, cons
     for (Py_ssize_t i = nt - 1; i >= 0; i--) {   /* newest window time first, as the plan */
         const double t = times[i], wt = w[i];
         if (t >= ts[last]) {
-            ADD(last, wt);
+            if (!slopes)
+                ADD(last, wt);
             continue;
         }
         while (k > 0 && ts[k - 1] > t)
             k--;
         if (k == 0) {
-            ADD(0, wt);
+            if (!slopes)
+                ADD(0, wt);
             continue;
         }
         const double t0 = ts[k - 1], t1 = ts[k];
+        if (slopes) {
+            if (t1 > t0) {
+                ADD(k - 1, -(wt / (t1 - t0)));
+                ADD(k, wt / (t1 - t0));
+            }
+            continue;
+        }
         const double f = t1 > t0 ? (t - t0) / (t1 - t0) : 1.0;
         ADD(k - 1, wt * (1.0 - f));
         ADD(k, wt * f);
@@ -273,7 +284,7 @@ static PyObject *py_matched(PyObject *self, PyObject *args)
     Py_ssize_t nt;
     PyObject *result = NULL;
     if (window_of(o_times, o_w, &times, &w, &nt) == 0
-        && matched_sum(o_ts, o_vs, times, w, nt, has_floor, floor_value, &total) == 0)
+        && matched_sum(o_ts, o_vs, times, w, nt, has_floor, floor_value, 0, &total) == 0)
         result = PyFloat_FromDouble(total);
     PyMem_Free(times);
     PyMem_Free(w);
@@ -317,7 +328,7 @@ static PyObject *py_matched_many(PyObject *self, PyObject *args)
                 PyErr_SetString(PyExc_TypeError, "matched_many: a series is a (times, values) pair");
                 goto fail;
             }
-            if (matched_sum(PyTuple_GET_ITEM(pair, 0), PyTuple_GET_ITEM(pair, 1), times, w, nt, has_floor, floor_value,
+            if (matched_sum(PyTuple_GET_ITEM(pair, 0), PyTuple_GET_ITEM(pair, 1), times, w, nt, has_floor, floor_value, 0,
                             &total) < 0
                 || !(value = PyFloat_FromDouble(total)))
                 goto fail;
@@ -333,14 +344,13 @@ done:
     return out;
 }
 
-/* InputAlignment._matched_brake_rates: each of the first NW lookups' series slopes (linear
- * between frames, 0 beyond them; each value less the floor, clipped at 0) averaged with the
- * window's weights, times gains[i], into rates[i] where the series has two frames or more
- * (have[i] = 1; else 0). 0, or -1 with an exception. */
+/* InputAlignment._matched_brake_rates: matched_sum of each of the first NW lookups' series'
+ * slopes, times gains[i], into rates[i] where the series has two frames or more (have[i] = 1;
+ * else 0). 0, or -1 with an exception. */
 static int matched_slopes(PyObject *lookups, PyObject *o_times, PyObject *o_w, const double *gains, double *rates,
                           int *have)
 {
-    double *times = NULL, *w = NULL, *ts = NULL, *vs = NULL;
+    double *times = NULL, *w = NULL;
     Py_ssize_t nt;
     int status = -1;
     if (window_of(o_times, o_w, &times, &w, &nt) < 0)
@@ -356,8 +366,9 @@ static int matched_slopes(PyObject *lookups, PyObject *o_times, PyObject *o_w, c
             continue;
         if (!PyArg_ParseTuple(lookup, "O!OO:matched_slopes", &PyDict_Type, &series, &name, &o_floor))
             goto out;
-        double floor_value = 0.0;
-        if (o_floor != Py_None && (floor_value = PyFloat_AsDouble(o_floor)) == -1.0 && PyErr_Occurred())
+        const int has_floor = o_floor != Py_None;
+        double floor_value = 0.0, total = 0.0;
+        if (has_floor && (floor_value = PyFloat_AsDouble(o_floor)) == -1.0 && PyErr_Occurred())
             goto out;
         PyObject *pair = PyDict_GetItemWithError(series, name);
         if (!pair) {
@@ -369,35 +380,14 @@ static int matched_slopes(PyObject *lookups, PyObject *o_times, PyObject *o_w, c
             PyErr_SetString(PyExc_TypeError, "matched_slopes: a series is a (times, values) pair");
             goto out;
         }
-        Py_ssize_t ns, nv;
-        PyMem_Free(ts);
-        PyMem_Free(vs);
-        ts = vs = NULL;
-        if (!(ts = floats_of(PyTuple_GET_ITEM(pair, 0), &ns, "ts")) || !(vs = floats_of(PyTuple_GET_ITEM(pair, 1), &nv, "vs")))
+        const Py_ssize_t ns = PyObject_Length(PyTuple_GET_ITEM(pair, 0));
+        if (ns < 0)
             goto out;
-        if (ns != nv) {
-            PyErr_SetString(PyExc_ValueError, "matched_slopes: ts and vs of one length");
-            goto out;
-        }
         if (ns < 2)
             continue;
-        const Py_ssize_t last = ns - 1;
-        Py_ssize_t k = last;
-        double total = 0.0;
-        for (Py_ssize_t j = nt - 1; j >= 0; j--) {   /* newest window time first, as the plan */
-            const double t = times[j];
-            if (t >= ts[last])
-                continue;
-            while (k > 0 && ts[k - 1] > t)
-                k--;
-            if (k == 0)
-                continue;
-            const double t0 = ts[k - 1], t1 = ts[k];
-            if (t1 > t0) {
-                const double a = vs[k - 1] - floor_value, b = vs[k] - floor_value;
-                total += w[j] * ((b > 0.0 ? b : 0.0) - (a > 0.0 ? a : 0.0)) / (t1 - t0);
-            }
-        }
+        if (matched_sum(PyTuple_GET_ITEM(pair, 0), PyTuple_GET_ITEM(pair, 1), times, w, nt, has_floor, floor_value, 1,
+                        &total) < 0)
+            goto out;
         rates[i] = gains[i] * total;
         have[i] = 1;
     }
@@ -405,8 +395,6 @@ static int matched_slopes(PyObject *lookups, PyObject *o_times, PyObject *o_w, c
 out:
     PyMem_Free(times);
     PyMem_Free(w);
-    PyMem_Free(ts);
-    PyMem_Free(vs);
     return status;
 }
 

@@ -72,27 +72,50 @@ class MessageHistory:
         return values[0]
 
 
-def interpolation_plan(ts: list[float], times: list[float], weights: list[float]) -> list[tuple[int, float]]:
+def interpolation_plan(ts: list[float], times: list[float], weights: list[float],
+                       slopes: bool = False) -> list[tuple[int, float]]:
     """(series index, coefficient) pairs with Σ coefficient·value = Σ_k weights_k·value(times_k),
-    value interpolated linearly in the series (held beyond its ends) as `MessageHistory.value_at`."""
+    value interpolated linearly in the series (held beyond its ends) as `MessageHistory.value_at`;
+    with `slopes`, = Σ_k weights_k·(the series' slope at times_k): its slope between the values
+    around each time, 0 beyond its ends (held) and across a repeated time."""
     coefficients: dict[int, float] = {}
     get = coefficients.get
     last = len(ts) - 1
     k = last
     for t, w in zip(reversed(times), reversed(weights)):
         if t >= ts[last]:
-            coefficients[last] = get(last, 0.0) + w
+            if not slopes:
+                coefficients[last] = get(last, 0.0) + w
             continue
         while k > 0 and ts[k - 1] > t:
             k -= 1
         if k == 0:
-            coefficients[0] = get(0, 0.0) + w
+            if not slopes:
+                coefficients[0] = get(0, 0.0) + w
             continue
         t0, t1 = ts[k - 1], ts[k]
+        if slopes:
+            if t1 > t0:
+                coefficients[k - 1] = get(k - 1, 0.0) - w / (t1 - t0)
+                coefficients[k] = get(k, 0.0) + w / (t1 - t0)
+            continue
         f = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
         coefficients[k - 1] = get(k - 1, 0.0) + w * (1.0 - f)
         coefficients[k] = get(k, 0.0) + w * f
     return list(coefficients.items())
+
+
+def plan_total(plan: list[tuple[int, float]], values, floor: float | None) -> float:
+    """Σ coefficient·value over an `interpolation_plan` (`max(0, value − floor)` per value when
+    `floor` is given)."""
+    if floor is None:
+        return sum(a * values[j] for j, a in plan)
+    total = 0.0
+    for j, a in plan:
+        v = values[j]
+        if v > floor:
+            total += a * (v - floor)
+    return total
 
 
 class InputAlignment:
@@ -134,21 +157,8 @@ class InputAlignment:
             if pair is None or len(pair[0]) < 2:
                 rates.append(None)
                 continue
-            ts, vs = pair
-            last = len(ts) - 1
-            total = 0.0
-            k = last
-            for t, w in zip(reversed(times), reversed(weights)):   # (newest first, as the plan)
-                if t >= ts[last]:
-                    continue            # held beyond the newest frame: no slope
-                while k > 0 and ts[k - 1] > t:
-                    k -= 1
-                if k == 0:
-                    continue            # before the oldest frame
-                t0, t1 = ts[k - 1], ts[k]
-                if t1 > t0:
-                    total += w * (max(0.0, vs[k] - pushout) - max(0.0, vs[k - 1] - pushout)) / (t1 - t0)
-            rates.append(self.vehicle.brake_gain(i) * total)
+            plan = interpolation_plan(list(pair[0]), times, weights, slopes=True)
+            rates.append(self.vehicle.brake_gain(i) * plan_total(plan, pair[1], pushout))
         return rates
 
     def _matched_inputs(self, pressures: list[float], accel_long_raw: float) -> tuple[list[float], float]:
@@ -179,14 +189,7 @@ class InputAlignment:
         plan = plans.get(key)
         if plan is None:
             plan = plans[key] = interpolation_plan(list(ts), list(self._wheel_times), self._torque_weights)
-        if floor is None:
-            return sum(a * vs[j] for j, a in plan)
-        total = 0.0
-        for j, a in plan:
-            v = vs[j]
-            if v > floor:
-                total += a * (v - floor)
-        return total
+        return plan_total(plan, vs, floor)
 
     def _value(self, name: str, time_s: float) -> float | None:
         history = self._source.get(name)

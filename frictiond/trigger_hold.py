@@ -64,17 +64,17 @@ class TriggerHold:
             out.extend(pending)
             pending.clear()
             self._newest.clear()
-        while pending and pending[0].time_s + self.max_wait_s <= item.time_s:
-            out.append(pending.popleft())
+        out.extend(self.due(item.time_s))
         if item.message == self.trigger:
             pending.append(item)
         else:
             out.append(item)
             if item.message in self.partners:
                 self._newest[item.message] = max(item.time_s, self._newest.get(item.message, item.time_s))
-        caught_up = min((self._newest.get(name, float("-inf")) for name in self.partners))
-        while pending and pending[0].time_s <= caught_up:
-            out.append(pending.popleft())
+        if pending:
+            caught_up = min(self._newest.get(name, float("-inf")) for name in self.partners)
+            while pending and pending[0].time_s <= caught_up:
+                out.append(pending.popleft())
         return out
 
     def due(self, now_s: float) -> list[DecodedInput]:

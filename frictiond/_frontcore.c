@@ -291,6 +291,27 @@ static PyObject *py_matched(PyObject *self, PyObject *args)
     return result;
 }
 
+/* One (series dict, name, floor or None) lookup of matched_many: *pair its (times, values) series
+ * (NULL: none yet), *has_floor and *floor_value its floor. 0, or -1 with an exception. */
+static int lookup_series(PyObject *lookup, const char *who, PyObject **pair, int *has_floor, double *floor_value)
+{
+    PyObject *series, *name, *o_floor;
+    *pair = NULL;
+    if (!PyArg_ParseTuple(lookup, "O!OO", &PyDict_Type, &series, &name, &o_floor))
+        return -1;
+    *has_floor = o_floor != Py_None;
+    *floor_value = 0.0;
+    if (*has_floor && (*floor_value = PyFloat_AsDouble(o_floor)) == -1.0 && PyErr_Occurred())
+        return -1;
+    if (!(*pair = PyDict_GetItemWithError(series, name)))
+        return PyErr_Occurred() ? -1 : 0;
+    if (!PyTuple_Check(*pair) || PyTuple_GET_SIZE(*pair) != 2) {
+        PyErr_Format(PyExc_TypeError, "%s: a series is a (times, values) pair", who);
+        return -1;
+    }
+    return 0;
+}
+
 /* matched for several signals: ((series dict, name, floor or None) | None, ...) -> tuple of float | None. */
 static PyObject *py_matched_many(PyObject *self, PyObject *args)
 {
@@ -307,27 +328,18 @@ static PyObject *py_matched_many(PyObject *self, PyObject *args)
     if (!(out = PyTuple_New(count)))
         goto done;
     for (Py_ssize_t i = 0; i < count; i++) {
-        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *series, *name, *o_floor, *value = NULL;
+        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *pair, *value = NULL;
         if (lookup == Py_None) {
             PyTuple_SET_ITEM(out, i, Py_NewRef(Py_None));
             continue;
         }
-        if (!PyArg_ParseTuple(lookup, "O!OO:matched_many", &PyDict_Type, &series, &name, &o_floor))
+        int has_floor;
+        double floor_value, total = 0.0;
+        if (lookup_series(lookup, "matched_many", &pair, &has_floor, &floor_value) < 0)
             goto fail;
-        const int has_floor = o_floor != Py_None;
-        double floor_value = 0.0, total = 0.0;
-        if (has_floor && (floor_value = PyFloat_AsDouble(o_floor)) == -1.0 && PyErr_Occurred())
-            goto fail;
-        PyObject *pair = PyDict_GetItemWithError(series, name);
         if (!pair) {
-            if (PyErr_Occurred())
-                goto fail;
             value = Py_NewRef(Py_None);   /* no series yet: the caller's fallback */
         } else {
-            if (!PyTuple_Check(pair) || PyTuple_GET_SIZE(pair) != 2) {
-                PyErr_SetString(PyExc_TypeError, "matched_many: a series is a (times, values) pair");
-                goto fail;
-            }
             if (matched_sum(PyTuple_GET_ITEM(pair, 0), PyTuple_GET_ITEM(pair, 1), times, w, nt, has_floor, floor_value, 0,
                             &total) < 0
                 || !(value = PyFloat_FromDouble(total)))
@@ -360,26 +372,16 @@ static int matched_slopes(PyObject *lookups, PyObject *o_times, PyObject *o_w, c
         goto out;
     }
     for (int i = 0; i < NW; i++) {
-        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *series, *name, *o_floor;
+        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *pair;
         have[i] = 0;
         if (lookup == Py_None)
             continue;
-        if (!PyArg_ParseTuple(lookup, "O!OO:matched_slopes", &PyDict_Type, &series, &name, &o_floor))
+        int has_floor;
+        double floor_value, total = 0.0;
+        if (lookup_series(lookup, "matched_slopes", &pair, &has_floor, &floor_value) < 0)
             goto out;
-        const int has_floor = o_floor != Py_None;
-        double floor_value = 0.0, total = 0.0;
-        if (has_floor && (floor_value = PyFloat_AsDouble(o_floor)) == -1.0 && PyErr_Occurred())
-            goto out;
-        PyObject *pair = PyDict_GetItemWithError(series, name);
-        if (!pair) {
-            if (PyErr_Occurred())
-                goto out;
+        if (!pair)
             continue;
-        }
-        if (!PyTuple_Check(pair) || PyTuple_GET_SIZE(pair) != 2) {
-            PyErr_SetString(PyExc_TypeError, "matched_slopes: a series is a (times, values) pair");
-            goto out;
-        }
         const Py_ssize_t ns = PyObject_Length(PyTuple_GET_ITEM(pair, 0));
         if (ns < 0)
             goto out;

@@ -164,9 +164,14 @@ class FrontEndOptions:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         if not 0 < self.max_slip < 1:
             raise ValueError(f"max_slip: must be in (0, 1), got {self.max_slip!r}")
-        for name in ("accel_bias_settle_s", "speed_correction_rate", "speed_correction_hold_s", "input_wait_periods"):
+        for name in ("accel_bias_settle_s", "speed_correction_rate", "speed_correction_hold_s", "input_wait_periods",
+                     "released_wheel_s"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name}: must be ≥ 0, got {getattr(self, name)!r}")
+        # A negative bound would let every released wheel through, a bound ≥ 1 none: both silently
+        # change which samples count as torqued rather than saying the setting is wrong.
+        if not 0 <= self.released_min_slip < 1:
+            raise ValueError(f"released_min_slip: must be in [0, 1), got {self.released_min_slip!r}")
 
 
 class FrontEnd(WheelSpeedFilter, SamplePhysics, SpeedEstimate, BodyEquation, DoubtfulInputs, InputAlignment,

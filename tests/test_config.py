@@ -70,6 +70,9 @@ BAD = [
     (lambda d: d["signals"].update(accel_long={"message": "ACCELERATIONS", "signal": "AccelLong", "scale": 0}), "scale"),
     (lambda d: d["output"].update(wheel_divider=0), "output.wheel_divider"),
     (lambda d: d["frontend"] if "frontend" in d else d.update(frontend={"min_speed": "x"}), "frontend.min_speed"),
+    (lambda d: d.setdefault("frontend", {}).update(released_wheel_s=-0.5), "released_wheel_s"),
+    (lambda d: d.setdefault("frontend", {}).update(released_min_slip=1.5), "released_min_slip"),
+    (lambda d: d.setdefault("frontend", {}).update(released_min_slip=-0.1), "released_min_slip"),
 ]
 
 

@@ -168,7 +168,10 @@ class LugreTROptions:
     drift_window_s: float = 0.15
     settle_s: float = 0.08                # confidence ramps up over the first excited instants
     hold_s: float = 2.0                   # VALID is kept this long after braking ends
-    excitation_hold_s: float = 0.15       # ... and this long while braking without excitation
+    # ... and this long while braking without excitation: one ABS cycle (`evidence_interval_s`), as the
+    # data show the peak once per cycle; a shorter hold withdraws a VALID between two cycles that
+    # each show it.
+    excitation_hold_s: float = 0.35
     jump_threshold: float = 2.5           # change detector: newest mean residual in noise std units
     jump_window_s: float = 0.08
     jump_refractory_s: float = 0.2        # after a detected jump, let the new road fill the window

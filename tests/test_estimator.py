@@ -597,6 +597,22 @@ def test_a_brake_applied_again_after_a_pause_needs_new_evidence(first_s):
     assert not wrong, wrong[:5]
 
 
+def test_a_valid_outlasts_the_gap_between_two_abs_cycles():
+    # The data show the peak once per ABS cycle (`evidence_interval_s`): between two cycles that
+    # each show it, the fit sees no excitation for most of a cycle. The VALID stands through such a
+    # gap, and goes once a whole cycle has passed without evidence.
+    est = LugreTrustRegionEstimator()
+    cycle = est.options.evidence_interval_s
+    valid = FrictionEstimate(1.00, Status.VALID, 0.83, 0.12, 1.0, 0.8)
+    est._last_valid, est._last_excited_s, est._last_estimate = valid, 1.00, valid
+    numbers = (0.80, 0.12, 1.0, (0.80,) * 4, 0.01, {})
+    within = est._decided(1.00 + 0.9 * cycle, 20.0, 0.0, 0.0, numbers)
+    assert within.status == Status.VALID and within.mu_max == 0.83
+    est._last_estimate = within
+    after = est._decided(1.00 + cycle + 0.05, 20.0, 0.0, 0.0, numbers)
+    assert after.status == Status.CONVERGING and after.mu_max == 0.80
+
+
 def test_a_valid_withdrawn_mid_stop_is_not_brought_back_at_standstill():
     # Campaign development stop 427: one VALID at 1.70 s (15 % low), CONVERGING from the next
     # update on; at 3.70 s, the car at rest, the hold published that VALID again, 22 % below a

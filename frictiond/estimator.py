@@ -485,6 +485,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._cache_x: np.ndarray | None = None
         self._core_rows_x: np.ndarray | None = None
         self._last_valid: FrictionEstimate | None = None
+        self._valid_since_s = math.inf   # when the standing run of VALID began (`_excitation_hold`)
         self._last_excited_s = -math.inf
         self._last_estimate: FrictionEstimate | None = None
         self._withdrawn_moving_s = -math.inf   # the last non-VALID update at a speed with evidence (`_hold`)

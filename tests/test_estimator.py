@@ -599,18 +599,27 @@ def test_a_brake_applied_again_after_a_pause_needs_new_evidence(first_s):
 
 def test_a_valid_outlasts_the_gap_between_two_abs_cycles():
     # The data show the peak once per ABS cycle (`evidence_interval_s`): between two cycles that
-    # each show it, the fit sees no excitation for most of a cycle. The VALID stands through such a
-    # gap, and goes once a whole cycle has passed without evidence.
-    est = LugreTrustRegionEstimator()
-    cycle = est.options.evidence_interval_s
-    valid = FrictionEstimate(1.00, Status.VALID, 0.83, 0.12, 1.0, 0.8)
-    est._last_valid, est._last_excited_s, est._last_estimate = valid, 1.00, valid
-    numbers = (0.80, 0.12, 1.0, (0.80,) * 4, 0.01, {})
-    within = est._decided(1.00 + 0.9 * cycle, 20.0, 0.0, 0.0, numbers)
+    # each show it, the fit sees no excitation for most of a cycle. A VALID that has stood a drift
+    # window stands through such a gap, and goes once a whole cycle has passed without evidence.
+    # One that has only just entered (a confidence flickering at the threshold) is held no longer
+    # than the drift window.
+    def gap_status(valid_since_s: float, gap_s: float) -> FrictionEstimate:
+        est = LugreTrustRegionEstimator()
+        valid = FrictionEstimate(1.00, Status.VALID, 0.83, 0.12, 1.0, 0.8)
+        est._last_valid, est._last_excited_s, est._last_estimate = valid, 1.00, valid
+        est._valid_since_s = valid_since_s
+        return est._decided(1.00 + gap_s, 20.0, 0.0, 0.0, (0.80, 0.12, 1.0, (0.80,) * 4, 0.01, {}))
+
+    o = LugreTROptions()
+    cycle, settled = o.evidence_interval_s, o.drift_window_s
+    assert cycle > 1.5 * settled
+    within = gap_status(1.00 - settled, 0.9 * cycle)
     assert within.status == Status.VALID and within.mu_max == 0.83
-    est._last_estimate = within
-    after = est._decided(1.00 + cycle + 0.05, 20.0, 0.0, 0.0, numbers)
+    after = gap_status(1.00 - settled, cycle + 0.05)
     assert after.status == Status.CONVERGING and after.mu_max == 0.80
+    young = gap_status(1.00 - 0.5 * settled, 0.9 * cycle)
+    assert young.status == Status.CONVERGING and young.mu_max == 0.80
+    assert gap_status(1.00 - 0.5 * settled, 0.9 * settled).status == Status.VALID
 
 
 def test_a_valid_withdrawn_mid_stop_is_not_brought_back_at_standstill():

@@ -174,31 +174,14 @@ out:
 /* matched(ts, vs, times, weights, floor) -> Σ_k weights_k·x(times_k), x interpolated linearly
  * in the series (ts, vs) and held beyond its ends, as FrontEnd._matched with
  * input_alignment.interpolation_plan; with a floor, each series value v counts as max(0, v − floor). */
-/* FrontEnd._matched of one series (o_ts, o_vs) over the window's times and weights: *total
- * (each value less floor_value and clipped at 0 when has_floor); with `slopes`, of the series'
- * slopes instead (interpolation_plan(..., slopes=True): 0 beyond its ends and across a repeated
- * time). 0, or -1 with an exception. */
-static int matched_sum(PyObject *o_ts, PyObject *o_vs, const double *times, const double *w, Py_ssize_t nt,
-                       int has_floor, double floor_value, int slopes, double *total_out)
+/* One walk of interpolation_plan over the series ts[0..ns) at the window's times and weights w,
+ * its coefficients into coef (zeroed, seen zeroed), summed in the order first touched: Σ w·value,
+ * each value less floor_value and clipped at 0 when has_floor; with `slopes`, Σ w·slope instead
+ * (interpolation_plan(..., slopes=True): 0 beyond its ends and across a repeated time). */
+static double plan_sum(const double *ts, const double *vs, Py_ssize_t ns, const double *times, const double *w,
+                       Py_ssize_t nt, int has_floor, double floor_value, int slopes, double *coef, Py_ssize_t *order,
+                       char *seen)
 {
-    Py_ssize_t ns, nv;
-    double *ts = NULL, *vs = NULL, *coef = NULL;
-    Py_ssize_t *order = NULL;
-    char *seen = NULL;
-    int status = -1;
-    if (!(ts = floats_of(o_ts, &ns, "ts")) || !(vs = floats_of(o_vs, &nv, "vs")))
-        goto out;
-    if (ns != nv || ns < 1) {
-        PyErr_SetString(PyExc_ValueError, "matched: ts and vs (non-empty) of one length");
-        goto out;
-    }
-    coef = PyMem_Calloc((size_t)ns, sizeof(double));
-    order = PyMem_Malloc((size_t)(ns + 1) * sizeof(Py_ssize_t));
-    seen = PyMem_Calloc((size_t)ns, 1);
-    if (!coef || !order || !seen) {
-        PyErr_NoMemory();
-        goto out;
-    }
     Py_ssize_t n_order = 0;
 #define ADD(j_, a_)                           \
     do {                                      \
@@ -245,8 +228,43 @@ static int matched_sum(PyObject *o_ts, PyObject *o_vs, const double *times, cons
         else if (vs[j] > floor_value)
             total += coef[j] * (vs[j] - floor_value);
     }
-    *total_out = total;
+    return total;
+}
+
+/* FrontEnd._matched of one series (o_ts, o_vs) over the window's times and weights: *total_out
+ * (each value less floor_value and clipped at 0 when has_floor). With slope_out, from the same
+ * reading of the series, its slopes so matched too (InputAlignment._matched_brake_rates) into
+ * *slope_out where it has two frames or more. 1 when *slope_out was set, else 0; -1 with an
+ * exception. */
+static int matched_sum(PyObject *o_ts, PyObject *o_vs, const double *times, const double *w, Py_ssize_t nt,
+                       int has_floor, double floor_value, double *total_out, double *slope_out)
+{
+    Py_ssize_t ns, nv;
+    double *ts = NULL, *vs = NULL, *coef = NULL;
+    Py_ssize_t *order = NULL;
+    char *seen = NULL;
+    int status = -1;
+    if (!(ts = floats_of(o_ts, &ns, "ts")) || !(vs = floats_of(o_vs, &nv, "vs")))
+        goto out;
+    if (ns != nv || ns < 1) {
+        PyErr_SetString(PyExc_ValueError, "matched: ts and vs (non-empty) of one length");
+        goto out;
+    }
+    coef = PyMem_Calloc((size_t)ns, sizeof(double));
+    order = PyMem_Malloc((size_t)(ns + 1) * sizeof(Py_ssize_t));
+    seen = PyMem_Calloc((size_t)ns, 1);
+    if (!coef || !order || !seen) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    *total_out = plan_sum(ts, vs, ns, times, w, nt, has_floor, floor_value, 0, coef, order, seen);
     status = 0;
+    if (slope_out && ns >= 2) {
+        memset(coef, 0, (size_t)ns * sizeof(double));
+        memset(seen, 0, (size_t)ns);
+        *slope_out = plan_sum(ts, vs, ns, times, w, nt, has_floor, floor_value, 1, coef, order, seen);
+        status = 1;
+    }
 out:
     PyMem_Free(ts);
     PyMem_Free(vs);
@@ -284,7 +302,7 @@ static PyObject *py_matched(PyObject *self, PyObject *args)
     Py_ssize_t nt;
     PyObject *result = NULL;
     if (window_of(o_times, o_w, &times, &w, &nt) == 0
-        && matched_sum(o_ts, o_vs, times, w, nt, has_floor, floor_value, 0, &total) == 0)
+        && matched_sum(o_ts, o_vs, times, w, nt, has_floor, floor_value, &total, NULL) == 0)
         result = PyFloat_FromDouble(total);
     PyMem_Free(times);
     PyMem_Free(w);
@@ -312,6 +330,53 @@ static int lookup_series(PyObject *lookup, const char *who, PyObject **pair, int
     return 0;
 }
 
+/* matched_many over the window's times and weights (nt of them): a tuple of float | None. With
+ * n_slopes, in the same pass, the first n_slopes lookups' series' matched slopes times gains[i]
+ * into rates[i] where a series has two frames or more (have[i] = 1; else 0):
+ * InputAlignment._matched_brake_rates. NULL with an exception. */
+static PyObject *matched_lookups(PyObject *lookups, const double *times, const double *w, Py_ssize_t nt,
+                                 Py_ssize_t n_slopes, const double *gains, double *rates, int *have)
+{
+    const Py_ssize_t count = PyTuple_GET_SIZE(lookups);
+    if (count < n_slopes) {
+        PyErr_SetString(PyExc_ValueError, "matched_many: too few lookups for their slopes");
+        return NULL;
+    }
+    PyObject *out = PyTuple_New(count);
+    if (!out)
+        return NULL;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *pair, *value = NULL;
+        if (i < n_slopes)
+            have[i] = 0;
+        if (lookup == Py_None) {
+            PyTuple_SET_ITEM(out, i, Py_NewRef(Py_None));
+            continue;
+        }
+        int has_floor;
+        double floor_value, total = 0.0, slope = 0.0;
+        if (lookup_series(lookup, "matched_many", &pair, &has_floor, &floor_value) < 0)
+            goto fail;
+        if (!pair) {
+            value = Py_NewRef(Py_None);   /* no series yet: the caller's fallback */
+        } else {
+            const int sloped = matched_sum(PyTuple_GET_ITEM(pair, 0), PyTuple_GET_ITEM(pair, 1), times, w, nt,
+                                           has_floor, floor_value, &total, i < n_slopes ? &slope : NULL);
+            if (sloped < 0 || !(value = PyFloat_FromDouble(total)))
+                goto fail;
+            if (sloped) {
+                rates[i] = gains[i] * slope;
+                have[i] = 1;
+            }
+        }
+        PyTuple_SET_ITEM(out, i, value);
+    }
+    return out;
+fail:
+    Py_DECREF(out);
+    return NULL;
+}
+
 /* matched for several signals: ((series dict, name, floor or None) | None, ...) -> tuple of float | None. */
 static PyObject *py_matched_many(PyObject *self, PyObject *args)
 {
@@ -322,82 +387,11 @@ static PyObject *py_matched_many(PyObject *self, PyObject *args)
     double *times, *w;
     Py_ssize_t nt;
     PyObject *out = NULL;
-    if (window_of(o_times, o_w, &times, &w, &nt) < 0)
-        goto done;
-    const Py_ssize_t count = PyTuple_GET_SIZE(lookups);
-    if (!(out = PyTuple_New(count)))
-        goto done;
-    for (Py_ssize_t i = 0; i < count; i++) {
-        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *pair, *value = NULL;
-        if (lookup == Py_None) {
-            PyTuple_SET_ITEM(out, i, Py_NewRef(Py_None));
-            continue;
-        }
-        int has_floor;
-        double floor_value, total = 0.0;
-        if (lookup_series(lookup, "matched_many", &pair, &has_floor, &floor_value) < 0)
-            goto fail;
-        if (!pair) {
-            value = Py_NewRef(Py_None);   /* no series yet: the caller's fallback */
-        } else {
-            if (matched_sum(PyTuple_GET_ITEM(pair, 0), PyTuple_GET_ITEM(pair, 1), times, w, nt, has_floor, floor_value, 0,
-                            &total) < 0
-                || !(value = PyFloat_FromDouble(total)))
-                goto fail;
-        }
-        PyTuple_SET_ITEM(out, i, value);
-    }
-    goto done;
-fail:
-    Py_CLEAR(out);
-done:
+    if (window_of(o_times, o_w, &times, &w, &nt) == 0)
+        out = matched_lookups(lookups, times, w, nt, 0, NULL, NULL, NULL);
     PyMem_Free(times);
     PyMem_Free(w);
     return out;
-}
-
-/* InputAlignment._matched_brake_rates: matched_sum of each of the first NW lookups' series'
- * slopes, times gains[i], into rates[i] where the series has two frames or more (have[i] = 1;
- * else 0). 0, or -1 with an exception. */
-static int matched_slopes(PyObject *lookups, PyObject *o_times, PyObject *o_w, const double *gains, double *rates,
-                          int *have)
-{
-    double *times = NULL, *w = NULL;
-    Py_ssize_t nt;
-    int status = -1;
-    if (window_of(o_times, o_w, &times, &w, &nt) < 0)
-        goto out;
-    if (!PyTuple_Check(lookups) || PyTuple_GET_SIZE(lookups) < NW) {
-        PyErr_SetString(PyExc_ValueError, "matched_slopes: four pressure lookups");
-        goto out;
-    }
-    for (int i = 0; i < NW; i++) {
-        PyObject *lookup = PyTuple_GET_ITEM(lookups, i), *pair;
-        have[i] = 0;
-        if (lookup == Py_None)
-            continue;
-        int has_floor;
-        double floor_value, total = 0.0;
-        if (lookup_series(lookup, "matched_slopes", &pair, &has_floor, &floor_value) < 0)
-            goto out;
-        if (!pair)
-            continue;
-        const Py_ssize_t ns = PyObject_Length(PyTuple_GET_ITEM(pair, 0));
-        if (ns < 0)
-            goto out;
-        if (ns < 2)
-            continue;
-        if (matched_sum(PyTuple_GET_ITEM(pair, 0), PyTuple_GET_ITEM(pair, 1), times, w, nt, has_floor, floor_value, 1,
-                        &total) < 0)
-            goto out;
-        rates[i] = gains[i] * total;
-        have[i] = 1;
-    }
-    status = 0;
-out:
-    PyMem_Free(times);
-    PyMem_Free(w);
-    return status;
 }
 
 /* MessageHistory.value_at for one signal: its (times, values) deques at time t; a new reference. */
@@ -1387,10 +1381,20 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     /* FrontEnd._matched_inputs */
     double torques[NW], accel_matched = a_raw;
     PyObject *matched = NULL;
+    /* (and the brake torques' rates at the sample's instant where the pressure series give them) */
+    double exact_rates[NW];
+    int have_rate[NW] = {0, 0, 0, 0};
     if (o_weights != Py_None) {
-        PyObject *margs = PyTuple_Pack(3, lookups, o_times, o_weights);
-        matched = margs ? py_matched_many(NULL, margs) : NULL;
-        Py_XDECREF(margs);
+        if (!PyTuple_Check(lookups)) {
+            PyErr_SetString(PyExc_TypeError, "matched_many: the lookups are a tuple");
+            return NULL;
+        }
+        double *times, *w;
+        Py_ssize_t nt;
+        if (window_of(o_times, o_weights, &times, &w, &nt) == 0)
+            matched = matched_lookups(lookups, times, w, nt, NW, k + K_BRAKE_GAIN_FL, exact_rates, have_rate);
+        PyMem_Free(times);
+        PyMem_Free(w);
         if (!matched)
             return NULL;
         if (PyTuple_GET_SIZE(matched) != NW + 1) {
@@ -1414,16 +1418,9 @@ static PyObject *py_sample_physics(PyObject *self, PyObject *const *args, Py_ssi
     Py_XDECREF(matched);
     double rates[NW], inertia[NW];
     brake_torque_rates(&s, k, t_c, torques, rates);
-    if (o_weights != Py_None) {
-        /* (the rates at the sample's instant where the pressure series give them) */
-        double exact[NW];
-        int have[NW];
-        if (matched_slopes(lookups, o_times, o_weights, k + K_BRAKE_GAIN_FL, exact, have) < 0)
-            return NULL;
-        for (int i = 0; i < NW; i++)
-            if (have[i])
-                rates[i] = exact[i];
-    }
+    for (int i = 0; i < NW; i++)
+        if (have_rate[i])
+            rates[i] = exact_rates[i];
     for (int i = 0; i < NW; i++)
         inertia[i] = k[K_INERTIA] * torque_omega_dot[i];
     if (k[K_GAIN_CORRECTION] != 0.0 && !glitch)

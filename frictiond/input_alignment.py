@@ -152,8 +152,7 @@ class InputAlignment:
         times = list(self._wheel_times)
         rates: list[float | None] = []
         for i, name in enumerate(PRESSURE_NAMES):
-            history = self._source.get(name)
-            pair = history.series.get(name) if history is not None else None
+            pair = self._series(name)
             if pair is None or len(pair[0]) < 2:
                 rates.append(None)
                 continue
@@ -178,8 +177,7 @@ class InputAlignment:
         """Σ w_k·x(t_k) over the derivative window's times, x interpolated in its series like
         `value_at` (`max(0, x − floor)` per series value when `floor` is given). The
         interpolation plan depends only on the series' timestamps: signals of one message share it."""
-        history = self._source.get(name)
-        pair = history.series.get(name) if history is not None else None
+        pair = self._series(name)
         if pair is None:
             return fallback if floor is None else max(0.0, fallback - floor)
         ts, vs = pair
@@ -190,6 +188,11 @@ class InputAlignment:
         if plan is None:
             plan = plans[key] = interpolation_plan(list(ts), list(self._wheel_times), self._torque_weights)
         return plan_total(plan, vs, floor)
+
+    def _series(self, name: str) -> tuple | None:
+        """The (times, values) series of input `name` as received; None before its first frame."""
+        history = self._source.get(name)
+        return history.series.get(name) if history is not None else None
 
     def _value(self, name: str, time_s: float) -> float | None:
         history = self._source.get(name)

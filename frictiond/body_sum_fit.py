@@ -10,8 +10,8 @@ A sum constrains the curves only over the slips the wheels swept. It shows the p
 wheel on each side spent `span_share` of the window below 0.8 and past 1.2 times its side's
 fitted peak slip: their μ passed over the peak, and the sum's top is the curves'. A slip
 controller holding its wheels short of the peak, or a gentle stop, sweeps no such span. Rows with
-a wheel far past the peak are left out, and a window made mostly of them shows nothing
-(`BodySumFit._fit`). The sum can trade one side's θ against the other's (on the campaign's
+a wheel far past the peak are left out, and a window made mostly of them (a threshold ABS) is
+fitted with a curve of no shape instead, which follows a tyre past its peak (`body_sum_curve`). The sum can trade one side's θ against the other's (on the campaign's
 split-μ stops the two fits swapped roads within a second), so it is evidence of one road only:
 the sides' peaks must agree within `max_side_ratio`, and so must the window's older and newer
 halves fitted apart (a change of road). Residuals above `max_rms_share` of μ_max mean the curves
@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .body_sum_curve import DRIFTING, NOT_IN_BOTH_HALVES, CurveSumFit, CurveSumOptions, curve_sum, fit_curve_sum
 from .samples import LEFT_WHEELS, N_WHEELS, RIGHT_WHEELS
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian_theta, peak, supported_slip
 
@@ -42,6 +43,9 @@ SPAN_PAST = 1.2
 MISFIT = "one curve does not fit the four wheels"
 # The verdict of the newest rows straying from the last fit: the window starts again.
 ROAD_CHANGE = "the road changing"
+# The verdict of a window whose free curve showed the peak at the last fit and no longer does: its
+# window spans several ABS cycles, so what changed is the rows (a road, the stop's end), not a phase.
+CURVE_LOST = "the free curve no longer shows the peak"
 # The verdict of sides whose fitted peaks differ: the sum cannot tell split μ (below).
 SIDES_DIFFER = "the two sides' fitted peaks differ"
 # Gauss–Newton on ln θ: the steps a fit may take, and the step size that ends it.
@@ -68,6 +72,7 @@ class BodySumOptions:
     max_lateral_mu: float = 0.05     # going straight: the window's lateral μ at most this
     peak_extrapolation: float = 1.6  # a wheel's peak is not read beyond this multiple of its slips fitted ...
     extrapolation_max_slip: float = 0.3  # ... nor beyond this slip where they did not go (the wheels' rule)
+    deep_curve: bool = True          # a window mostly of wheels deep past the peak: the free curve's (`body_sum_curve`)
 
 
 @dataclass(frozen=True)
@@ -75,7 +80,8 @@ class BodySumResult:
     """One fit: μ_max and λ* at the speed given, each wheel's fitted peak slip, θ, the
     residuals' rms over μ_max, how far the residuals rise from the rows of shallow slips to the
     deep ones (over μ_max: `_rise`), which wheels spanned the fitted peak, the window's largest
-    lateral μ, the rows fitted, and why it does not show the peak ("" when it does)."""
+    lateral μ, the rows fitted, and why it does not show the peak ("" when it does); from the free
+    curve (`body_sum_curve`), its peak's standard error over μ_max (0 from the static curve)."""
     mu_max: float
     slip_star: float
     wheel_slip_star: tuple[float, ...]
@@ -86,6 +92,7 @@ class BodySumResult:
     lateral_mu: float
     rows: int
     verdict: str
+    curve_se_share: float = 0.0
 
 
 class BodySumFit:
@@ -104,6 +111,7 @@ class BodySumFit:
         self._log_thetas = np.full(2, self._prior_log_theta)
         self._last_fit_s = -math.inf
         self._last: BodySumResult | None = None
+        self._last_curve: CurveSumFit | None = None   # the free curve behind `_last`, if it is one
 
     def clear(self) -> None:
         """Forget the rows and the last fit (a new stop, a new road)."""
@@ -111,6 +119,7 @@ class BodySumFit:
         self._log_thetas = np.full(2, self._prior_log_theta)
         self._last_fit_s = -math.inf
         self._last = None
+        self._last_curve = None
 
     def push(self, time_s: float, speed_mps: float, slips: tuple[float, ...], loads: tuple[float, ...],
              body_mu: float, lateral_mu: float) -> None:
@@ -144,10 +153,15 @@ class BodySumFit:
         if self._last is not None and now_s - self._last_fit_s < o.fit_every_s:
             return self._last
         self._last_fit_s = now_s
-        self._last = self._fit(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
-                               np.array([r[2] for r in rows]), np.array([r[3] for r in rows]),
-                               np.array([r[4] for r in rows]), max(r[5] for r in rows), max(speed_mps, o.min_speed_mps))
-        return self._last
+        curve_shown = self._last_curve is not None
+        self._last_curve = None
+        fit = self._fit(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                        np.array([r[2] for r in rows]), np.array([r[3] for r in rows]),
+                        np.array([r[4] for r in rows]), max(r[5] for r in rows), max(speed_mps, o.min_speed_mps))
+        if curve_shown and fit.verdict and fit.verdict != MISFIT:
+            fit = dataclasses.replace(fit, verdict=CURVE_LOST)
+        self._last = fit
+        return fit
 
     def _road_changed(self) -> bool:
         """Whether the newest `innovation_window_s` of rows stray from the last fit by more than
@@ -169,12 +183,18 @@ class BodySumFit:
         last = self._last
         if last is None or last.verdict:   # (none yet, a change just started the window again,
             return False                   # or a curve that does not describe the rows)
-        deepest = o.max_slip_ratio * np.array(last.wheel_slip_star)
         newest = []
         for row in reversed(self._rows):
             if row[0] < self._rows[-1][0] - o.innovation_window_s:
                 break
             newest.append(row)
+        if self._last_curve is not None:
+            # (the free curve describes deep slips too: every newest row is read)
+            model = curve_sum(self._last_curve.values, np.array([r[2] for r in newest]),
+                              np.array([r[3] for r in newest]))
+            residual = float(np.mean(np.array([r[4] for r in newest]) - model))
+            return len(newest) >= 4 and abs(residual) > o.max_innovation_share * last.mu_max
+        deepest = o.max_slip_ratio * np.array(last.wheel_slip_star)
         described = [row for row in newest if (np.array(row[2]) <= deepest).all()]
         # (a few described rows among deep ones are the cycle's turning points: re-applying
         # tyres whose force lags their slip, not a road)
@@ -200,6 +220,8 @@ class BodySumFit:
         _, wheel_slip = self._peaks(x, speed_now)
         near = (slips <= o.max_slip_ratio * wheel_slip).all(axis=1)
         enough = int(near.sum()) >= max(o.min_rows, o.min_near_share * len(body))
+        if not enough and o.deep_curve:
+            return self._deep_fit(x, times, slips, shares, body, lateral_mu)
         if enough:
             times, speed, slips, shares, body = times[near], speed[near], slips[near], shares[near], body[near]
             x = self._solve(x, speed, slips, shares, body)
@@ -228,6 +250,32 @@ class BodySumFit:
         return BodySumResult(mu_max, float(share @ wheel_slip), tuple(wheel_slip.tolist()), float(np.exp(x).mean()),
                              rms_share, rise_share,
                              tuple(spans.tolist()), lateral_mu, len(body), verdict)
+
+    def _deep_fit(self, x: np.ndarray, times: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray,
+                  lateral_mu: float) -> BodySumResult:
+        """The free curve's fit where most rows hold a wheel far past the peak (`body_sum_curve`);
+        its verdict in words after "wheels deep past the peak"."""
+        o = self.options
+        curve = fit_curve_sum(slips, shares, body)
+        star = curve.slip_star
+        period = float(np.median(np.diff(times)))
+        rms_share = (_block_rms(curve_sum(curve.values, slips, shares) - body, o.misfit_block_s / max(period, 1e-6))
+                     / max(curve.mu_max, 1e-6))
+        below = (slips <= SPAN_BELOW * star).mean(axis=0)
+        past = (slips >= SPAN_PAST * star).mean(axis=0)
+        spans = (below >= o.span_share) & (past >= o.span_share)
+        if curve.verdict in (DRIFTING, NOT_IN_BOTH_HALVES):
+            verdict = MISFIT
+        elif curve.verdict:
+            verdict = f"wheels deep past the peak; {curve.verdict}"
+        elif lateral_mu > o.max_lateral_mu:
+            verdict = "turning"
+        else:
+            verdict = ""
+            self._last_curve = curve
+        self._log_thetas = x
+        return BodySumResult(curve.mu_max, star, (star,) * N_WHEELS, float(np.exp(x).mean()), rms_share, 0.0,
+                             tuple(spans.tolist()), lateral_mu, len(body), verdict, curve.se_share)
 
     def _held_within_data(self, x: np.ndarray, wheel_mu: np.ndarray, wheel_slip: np.ndarray, support: np.ndarray,
                           speed: float) -> np.ndarray:

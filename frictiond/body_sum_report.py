@@ -15,7 +15,7 @@ import math
 from collections import deque
 
 from . import input_quality, not_valid
-from .body_sum_fit import MISFIT, ROAD_CHANGE, BodySumFit, BodySumOptions
+from .body_sum_fit import CURVE_LOST, MISFIT, ROAD_CHANGE, BodySumFit, BodySumOptions
 from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
 from .tyre_model import LugreParams
 
@@ -33,7 +33,8 @@ class BodySumReport:
         self._body_sum = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),
                                     o.left_right_coupling,
                                     BodySumOptions(peak_extrapolation=o.peak_extrapolation,
-                                                   extrapolation_max_slip=o.extrapolation_max_slip))
+                                                   extrapolation_max_slip=o.extrapolation_max_slip,
+                                                   deep_curve=o.body_sum_curve))
         self._body_sum_history: deque[tuple[float, float]] = deque()
         self._body_force_doubt = 0.0   # the newest row's (`PhysicalSample.body_force_doubt`)
 
@@ -68,18 +69,21 @@ class BodySumReport:
         drift = (max(m for _, m in history) - min(m for _, m in history)) / scale
         doubt = self._body_force_doubt / scale
         rise = o.misfit_peak_ratio * max(fit.rise_share, 0.0)
-        spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0 + rise ** 2
+        curve = o.body_sum_curve_error_ratio * fit.curve_se_share
+        spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0 + rise ** 2 + curve ** 2
         confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
         confidence *= input_quality.confidence_factor(self._input_share)
         detail = {"body_sum": 1.0, "body_sum_rms": fit.rms_share, "body_sum_rise": fit.rise_share,
+                  "body_sum_curve_se": fit.curve_se_share,
                   "body_sum_spanning": float(sum(fit.spans)), "body_sum_rows": float(fit.rows)}
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
         if fit.verdict:
             # One ABS cycle without evidence keeps a VALID, as the wheels' fit's does; a curve that
-            # no longer fits does not: the road may be changing under it.
+            # no longer fits, or no longer shows the peak it showed over several cycles, does not:
+            # the road may be changing under it.
             recent = self._last_valid is not None and now_s - self._last_excited_s <= o.excitation_hold_s
-            if recent and fit.verdict not in (MISFIT, ROAD_CHANGE):
+            if recent and fit.verdict not in (MISFIT, ROAD_CHANGE, CURVE_LOST):
                 return self._hold(now_s, speed)
             self._not_valid = not_valid.body_sum_reason(fit.verdict)
             confidence = 0.0

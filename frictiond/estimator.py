@@ -213,6 +213,13 @@ class LugreTROptions:
     # dev seeds, but the forced split-μ set's were not (see benchmarks/README.md, session 73).
     body_sum: bool = True
     body_sum_mismatch: float = 0.08
+    # The free curve's peak (`body_sum_curve`, wheels deep past the peak): its standard error from
+    # the residuals counts this many times in σ. On the development campaign's master-cylinder-only
+    # cars the error against the truth was within 2.4 standard errors two times in three (dev 0–999,
+    # 20000–20999, 40000–40999): the max of the knots picks the one noise lifted, and the rows of
+    # an ABS cycle correlate over more than the blocks the noise is read over.
+    body_sum_curve_error_ratio: float = 2.4
+    body_sum_curve: bool = True   # the free curve where the body sum's wheels run deep (off: "wheels deep past the peak")
 
     def validate(self) -> None:
         for f in fields(self):

@@ -1,10 +1,15 @@
 """The free curve of the car's total tyre force (`body_sum_curve`), where the wheels run deep past
 their peaks, and the estimate the body sum gives from it. The truths are Magic Formula and
 Burckhardt curves, not a piecewise-linear curve nor the estimator's LuGre."""
+import math
+
 import numpy as np
 import pytest
 
 from frictiond.body_sum_curve import AT_EDGE, DRIFTING, FEW_ROWS, NO_FALL, NOT_IN_BOTH_HALVES, fit_curve_sum
+from frictiond.body_sum_fit import CURVE_LOST
+from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
+from frictiond.samples import PhysicalSample, Status
 
 RATE_HZ = 100
 LOADS = np.array([4800.0, 4800.0, 3200.0, 3200.0])
@@ -96,3 +101,52 @@ def test_two_roads_met_at_different_slips_draw_no_peak():
     fit = fit_curve_sum(np.vstack((s1, s2)), np.vstack((sh1, sh2)), np.concatenate((b1, b2)))
     assert fit.verdict == NOT_IN_BOTH_HALVES
     assert fit.mu_max > 1.5 * 0.35   # (the "peak" it would have drawn: the dry road's)
+
+
+def body_samples(curve, slips_of, seconds=2.5, start_speed=25.0, noise=0.01, seed=5, lateral_of=lambda t: 0.0):
+    """Samples of a car sending its master cylinder's pressure alone, its ABS working every wheel:
+    no wheel's μ measured (`usable` all False), the body's μ from the accelerometer."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(int(seconds * RATE_HZ)):
+        t = k / RATE_HZ
+        slips = slips_of(t)
+        body = float((SHARES * curve(slips)).sum() + noise * rng.standard_normal())
+        out.append(PhysicalSample(time_s=t, speed_mps=start_speed - 5.0 * t, slip=tuple(slips.tolist()),
+                                  mu_used=(math.nan,) * 4, normal_force_n=tuple(LOADS.tolist()),
+                                  tyre_force_n=(0.0,) * 4, usable=(False,) * 4, braking=True,
+                                  lateral_mu=lateral_of(t), body_force_mu=body, wheel_torques_unknown=True))
+    return out
+
+
+def test_the_estimator_publishes_the_free_curve_where_the_wheels_run_deep():
+    peak, _ = peak_of(magic_formula)
+    samples = body_samples(magic_formula, threshold_abs_slips)
+    estimator = LugreTrustRegionEstimator()
+    estimates = [estimator.update(s) for s in samples]
+    valid = [e for e in estimates if e.status == Status.VALID]
+    assert len(valid) > 0.3 * len(estimates)
+    assert all(abs(e.mu_max / peak - 1.0) < 0.1 for e in valid)
+    assert all(e.detail["body_sum_curve_se"] > 0.0 for e in valid)
+    # Without the free curve the body sum leaves the deep rows out and shows nothing.
+    static_only = LugreTrustRegionEstimator(LugreTROptions(body_sum_curve=False))
+    without = [static_only.update(s) for s in samples]
+    assert Status.VALID not in {e.status for e in without}
+    assert static_only.not_valid_reason.endswith("(wheels deep past the peak)")
+
+
+def test_a_valid_from_the_curve_goes_at_once_when_the_curve_stops_showing_the_peak():
+    """Deep ABS cycles, then the car steered into a turn (lateral μ 0.2: the sum no longer holds
+    all the grip the tyres use). A VALID between two ABS cycles is held for one
+    (`excitation_hold_s`); one from the free curve, whose window spans several cycles, goes at the
+    first fit that no longer shows its peak."""
+    samples = body_samples(magic_formula, threshold_abs_slips, seconds=3.0, lateral_of=lambda t: 0.2 * (t >= 2.0))
+    estimator = LugreTrustRegionEstimator()
+    estimates, reasons = [], []
+    for sample in samples:
+        estimates.append(estimator.update(sample))
+        reasons.append(estimator.not_valid_reason)
+    assert estimates[199].status == Status.VALID
+    after = [i for i in range(200, len(estimates)) if estimates[i].status != Status.VALID]
+    assert after and after[0] <= 200 + 6   # (the next fit, every 0.05 s)
+    assert CURVE_LOST in reasons[after[0]]

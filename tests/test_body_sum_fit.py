@@ -139,10 +139,16 @@ def test_a_force_still_rising_past_the_fitted_peak_shows_in_the_residuals():
         assert crossed.verdict == "" and crossed.rise_share < 0.01
 
 
-def test_wheels_dwelling_past_the_peak_show_nothing():
-    _, slip = burckhardt_peak(DRY)
-    deep = fitted(new_fit(), rows([DRY] * 4, lambda t: cycling_slips(t, slip, low=0.5, high=6.0)))
-    assert deep.verdict == "wheels deep past the peak"
+def test_wheels_dwelling_past_the_peak_are_left_to_the_free_curve():
+    """Rows whose wheels sweep far past the peak are no evidence for the static curve; the free
+    curve (`body_sum_curve`) follows the tyre there and reads its peak."""
+    peak, slip = burckhardt_peak(DRY)
+    data = rows([DRY] * 4, lambda t: cycling_slips(t, slip, low=0.5, high=6.0))
+    assert fitted(new_fit(deep_curve=False), data).verdict == "wheels deep past the peak"
+    deep = fitted(new_fit(), data)
+    assert deep.verdict == ""
+    assert deep.curve_se_share > 0.0
+    assert deep.mu_max == pytest.approx(peak, rel=0.06)
 
 
 def test_a_change_of_road_is_seen_at_once_and_starts_the_window_again():

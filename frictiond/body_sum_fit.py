@@ -46,6 +46,8 @@ ROAD_CHANGE = "the road changing"
 # The verdict of a window whose free curve showed the peak at the last fit and no longer does: its
 # window spans several ABS cycles, so what changed is the rows (a road, the stop's end), not a phase.
 CURVE_LOST = "the free curve no longer shows the peak"
+# The verdict of a window whose wheels mostly stay near the peak, where only deep ones are read.
+NOT_DEEP = "wheels not deep past the peak"
 # The verdict of sides whose fitted peaks differ: the sum cannot tell split μ (below).
 SIDES_DIFFER = "the two sides' fitted peaks differ"
 # Gauss–Newton on ln θ: the steps a fit may take, and the step size that ends it.
@@ -73,6 +75,7 @@ class BodySumOptions:
     peak_extrapolation: float = 1.6  # a wheel's peak is not read beyond this multiple of its slips fitted ...
     extrapolation_max_slip: float = 0.3  # ... nor beyond this slip where they did not go (the wheels' rule)
     deep_curve: bool = True          # a window mostly of wheels deep past the peak: the free curve's (`body_sum_curve`)
+    deep_only: bool = False          # only such windows fitted (beside the wheels' fit: `body_curve_report`)
 
 
 @dataclass(frozen=True)
@@ -216,6 +219,8 @@ class BodySumFit:
         the priors, falls about 12 % there: rows with such a wheel would pull the fitted peak
         towards the sliding level. Near the peak every tyre's curve is round, as the model's."""
         o = self.options
+        if o.deep_only:
+            return self._deep_only_fit(times, slips, shares, body, lateral_mu)
         x = self._solve(self._log_thetas, speed, slips, shares, body)
         _, wheel_slip = self._peaks(x, speed_now)
         near = (slips <= o.max_slip_ratio * wheel_slip).all(axis=1)
@@ -250,6 +255,18 @@ class BodySumFit:
         return BodySumResult(mu_max, float(share @ wheel_slip), tuple(wheel_slip.tolist()), float(np.exp(x).mean()),
                              rms_share, rise_share,
                              tuple(spans.tolist()), lateral_mu, len(body), verdict)
+
+    def _deep_only_fit(self, times: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray,
+                       lateral_mu: float) -> BodySumResult:
+        """The free curve's fit where most rows hold a wheel past twice the slip of the curve's own
+        top (as `_fit` asks of the static curve's, without its Gauss–Newton solve); else `NOT_DEEP`."""
+        o = self.options
+        star = fit_curve_sum(slips, shares, body).slip_star
+        near = (slips <= o.max_slip_ratio * star).all(axis=1)
+        if int(near.sum()) >= max(o.min_rows, o.min_near_share * len(body)):
+            return BodySumResult(math.nan, math.nan, (math.nan,) * N_WHEELS, math.nan, 0.0, 0.0, (False,) * N_WHEELS,
+                                 lateral_mu, len(body), NOT_DEEP)
+        return self._deep_fit(self._log_thetas, times, slips, shares, body, lateral_mu)
 
     def _deep_fit(self, x: np.ndarray, times: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray,
                   lateral_mu: float) -> BodySumResult:

@@ -55,6 +55,7 @@ from .speed_error import SpeedErrorBound, SpeedErrorOptions
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta
 from .vehicle import VehicleParams
 from .axle_balance import AxleBalance
+from .body_curve_report import BodyCurveReport
 from .body_sum_report import BodySumReport
 from .estimate_confidence import EstimateConfidence
 from .estimate_report import EstimateReport
@@ -220,6 +221,10 @@ class LugreTROptions:
     # an ABS cycle correlate over more than the blocks the noise is read over.
     body_sum_curve_error_ratio: float = 2.4
     body_sum_curve: bool = True   # the free curve where the body sum's wheels run deep (off: "wheels deep past the peak")
+    # Where the wheels' torques are known and their fit is not VALID, the free curve of the car's
+    # total force beside it, VALID where it shows the peak with VALID's confidence (`body_curve_report`).
+    body_curve_beside_wheels: bool = True
+    body_curve_agreement: float = 0.15   # ... and where the wheels' fit, CONVERGING, is within this share of it
 
     def validate(self) -> None:
         for f in fields(self):
@@ -442,7 +447,7 @@ class _SmoothedMaximum:
 
 
 class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, EstimateReport, FitParameters,
-                                AxleBalance, BodySumReport, StopFit):
+                                AxleBalance, BodySumReport, BodyCurveReport, StopFit):
     """Recursive, bounded trust-region NLLS fit of static LuGre; one `update` per bus cycle."""
 
     kind = "lugre-tr"
@@ -542,6 +547,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._last_update_s: float | None = None
         self._cov_unit: np.ndarray | None = None
         self._init_body_sum()
+        self._init_body_curve()
 
     def _new_event(self) -> None:
         """The first samples after the window ran empty: a new braking event begins.
@@ -653,7 +659,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         samples = len(self._window)
         last = self._last_estimate
         if added and samples >= o.min_samples:
-            return self._kept_as_stop_fit(self._fit(t, v), t)
+            return self._kept_as_stop_fit(self._beside_body_curve(self._fit(t, v), sample), t)
         if not added and sample.wheel_torques_unknown and (body := self._body_sum_estimate(t, v)) is not None:
             return self._kept_as_stop_fit(body, t)
         if (samples >= o.min_samples and last is not None and last.status == Status.CONVERGING
@@ -664,8 +670,8 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
             # that saw the road change: it describes the old road. The brakes still hold a wheel
             # in slip: not the pedal letting go, every slip fallen below what the fit takes.)
             slipping = sample.braking and any(slip >= o.min_slip for slip in sample.slip)
-            return self._restate(last, t, slipping)
-        return self._starved(t, v)
+            return self._beside_body_curve(self._restate(last, t, slipping), sample)
+        return self._beside_body_curve(self._starved(t, v), sample)
 
     @property
     def not_valid_reason(self) -> str:
@@ -693,6 +699,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._window.clear()
         self._mu_history.clear()
         self._clear_body_sum()
+        self._clear_body_curve()
         self._last_update_s = None
         self._stop_fit = None
         self._last_braking_s = -math.inf
@@ -732,6 +739,7 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         if body_mu == body_mu:   # (not NaN: braking, with a fresh accelerometer)
             self._body_mu.push(t, body_mu)
         self._take_in_body_sum(sample)
+        self._take_in_body_curve(sample)
         if abs_active[0] or abs_active[1] or abs_active[2] or abs_active[3]:
             for i in range(N_WHEELS):
                 if abs_active[i]:

@@ -150,3 +150,47 @@ def test_a_valid_from_the_curve_goes_at_once_when_the_curve_stops_showing_the_pe
     after = [i for i in range(200, len(estimates)) if estimates[i].status != Status.VALID]
     assert after and after[0] <= 200 + 6   # (the next fit, every 0.05 s)
     assert CURVE_LOST in reasons[after[0]]
+
+
+def wheel_and_body_samples(curve, slips_of, wheel_scale=1.0, wheel_noise=0.12, seconds=3.0, seed=7):
+    """A car whose wheels' torques are known: each wheel's μ as its torque balance reads it (times
+    `wheel_scale`, with `wheel_noise`: a derivative filter's noise under ABS, enough to keep the
+    wheels' fit from VALID), and the body's μ from the accelerometer."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(int(seconds * RATE_HZ)):
+        t = k / RATE_HZ
+        slips = slips_of(t)
+        mus = wheel_scale * curve(slips) + wheel_noise * rng.standard_normal(4)
+        body = float((SHARES * curve(slips)).sum() + 0.01 * rng.standard_normal())
+        out.append(PhysicalSample(time_s=t, speed_mps=25.0 - 5.0 * t, slip=tuple(slips.tolist()),
+                                  mu_used=tuple(mus.tolist()), normal_force_n=tuple(LOADS.tolist()),
+                                  tyre_force_n=tuple((mus * LOADS).tolist()), usable=(True,) * 4, braking=True,
+                                  lateral_mu=0.0, body_force_mu=body, wheel_torques_unknown=False))
+    return out
+
+
+def statuses_and_sources(estimator, samples):
+    out = []
+    for sample in samples:
+        e = estimator.update(sample)
+        out.append((e.status, bool(e.detail and e.detail.get("body_curve")), e.mu_max))
+    return out
+
+
+def test_beside_a_wheels_fit_that_agrees_the_free_curve_gives_the_valid():
+    """Threshold-ABS cycles on a sharp Magic Formula tyre, the wheels' μ too noisy for their fit
+    to be VALID: the car's total force shows the peak, and where the wheels' fit puts it within
+    15 %, the curve's estimate is VALID. Off, or with the wheels reading 35 % low (a fit that
+    disagrees), it is not."""
+    peak, _ = peak_of(magic_formula)
+    samples = wheel_and_body_samples(magic_formula, threshold_abs_slips)
+    beside = statuses_and_sources(LugreTrustRegionEstimator(), samples)
+    from_curve = [mu for status, curve, mu in beside if status == Status.VALID and curve]
+    assert len(from_curve) > 30
+    assert all(abs(mu / peak - 1.0) < 0.1 for mu in from_curve)
+    alone = statuses_and_sources(LugreTrustRegionEstimator(LugreTROptions(body_curve_beside_wheels=False)), samples)
+    assert not any(curve for _, curve, _ in alone)
+    assert sum(status == Status.VALID for status, _, _ in alone) < len(from_curve)
+    low_wheels = wheel_and_body_samples(magic_formula, threshold_abs_slips, wheel_scale=0.65)
+    assert not any(curve for _, curve, _ in statuses_and_sources(LugreTrustRegionEstimator(), low_wheels))

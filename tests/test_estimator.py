@@ -921,9 +921,10 @@ def test_every_valid_output_makes_a_false_valid_unlikely():
     # The confidence is the probability of μ_max within 10 %; by the same error model a VALID kept
     # down to 0.63 has a 7 % chance of being more than 20 % off (16 % at 0.52). Dev stop 638 (a
     # threshold ABS on a Magic Formula tyre) leaves VALID eight times at a confidence of
-    # 0.56-0.63, each of which a hysteresis down to 0.52 would have kept VALID.
+    # 0.56-0.63, each of which a hysteresis down to 0.52 would have kept VALID. (The wheels' fit
+    # alone: beside it, the car's total force covers some of those gaps, `body_curve_report`.)
     keep = LugreTROptions().keep_valid_confidence
-    _stop, estimates = campaign_stop_estimates(638)
+    _stop, estimates = campaign_stop_estimates(638, body_curve_beside_wheels=False)
     valid = [e for e in estimates if e.status == Status.VALID]
     assert len(valid) > 300 and min(e.confidence for e in valid) >= keep
     left = [e for e, before in zip(estimates[1:], estimates) if before.status == Status.VALID != e.status]

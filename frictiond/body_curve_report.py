@@ -1,0 +1,100 @@
+"""The car's total force beside the wheels' fit: where that fit is not VALID, the free curve of the
+body's force (`body_sum_curve`) may be.
+
+`BodyCurveReport` is a part of `LugreTrustRegionEstimator`. On a car whose wheels' brake torques
+are known, the wheels' fit reads each wheel's μ from its torque balance: through the brakes' gain
+(±20 % off what the config says until the body equation corrects it) and through the derivative
+filter, whose mean over a sample's slips falls short of the curve where it bends at the top. Under
+a threshold ABS, whose wheels cross the peak in a sample or two and dwell deep past it, that fit's
+spread often keeps it from VALID. The accelerometer has neither error: the body's μ against the
+four slips, fitted with a curve of no shape over a window of several ABS cycles, shows the peak
+where the force falls past its top on every cycle. The same fit reads master-cylinder-only cars'
+deep windows (`body_sum_report`); here it is a second source, read only in windows whose wheels
+run mostly deep past the peak (a threshold ABS; where they stay near it, the fall past the top
+rests on few rows, and on the development campaign's slip and deceleration controllers the curve
+read changes of road and split μ as peaks), and published only where it shows the peak with VALID's
+confidence, the wheels' fit is not VALID, and that fit puts the peak near the curve's.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from . import input_quality
+from .body_sum_fit import BodySumFit, BodySumOptions
+from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
+from .tyre_model import LugreParams
+
+# The free curve's μ_max drift is read over this long (as the body sum's).
+DRIFT_WINDOW_S = 0.3
+
+
+class BodyCurveReport:
+    """Rows of the body's force in beside the wheels' samples; a VALID from the free curve out
+    where the wheels' fit gives none (`_beside_body_curve`)."""
+
+    def _init_body_curve(self) -> None:
+        o = self.options
+        shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
+                            alpha=o.alpha, patch_length=o.patch_length)
+        self._body_curve = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),
+                                      o.left_right_coupling, BodySumOptions(deep_only=True))
+        self._body_curve_history: deque[tuple[float, float]] = deque()
+
+    def _clear_body_curve(self) -> None:
+        self._body_curve.clear()
+        self._body_curve_history.clear()
+
+    def _take_in_body_curve(self, sample: PhysicalSample) -> None:
+        """The sample's row of the body's force, where the wheels' torques are known (where they
+        are not, `body_sum_report` reads the rows)."""
+        if self.options.body_curve_beside_wheels and sample.braking and not sample.wheel_torques_unknown:
+            self._body_curve.push(sample.time_s, sample.speed_mps, sample.slip, sample.normal_force_n,
+                                  sample.body_force_mu, sample.lateral_mu)
+
+    def _beside_body_curve(self, estimate: FrictionEstimate, sample: PhysicalSample) -> FrictionEstimate:
+        """`estimate` (the wheels' fit's, a restated or held one), or where it is not VALID the
+        free curve's, VALID, if that shows the peak with the confidence VALID needs: σ² as the
+        body sum's, `body_sum_mismatch`² + drift² + the accelerometer's and drag's doubt²/3 +
+        (`body_sum_curve_error_ratio` × the curve's standard error)²."""
+        o = self.options
+        now_s, speed = sample.time_s, sample.speed_mps
+        if (estimate.status == Status.VALID or not o.body_curve_beside_wheels or sample.wheel_torques_unknown
+                or not speed >= o.peak_evidence_min_speed):
+            return estimate
+        fit = self._body_curve.result(now_s, speed)
+        history = self._body_curve_history
+        if fit is None or fit.verdict:
+            history.clear()
+            return estimate
+        history.append((now_s, fit.mu_max))
+        while history and history[0][0] < now_s - DRIFT_WINDOW_S:
+            history.popleft()
+        scale = max(fit.mu_max, 0.05)
+        drift = (max(m for _, m in history) - min(m for _, m in history)) / scale
+        doubt = sample.body_force_doubt / scale
+        curve = o.body_sum_curve_error_ratio * fit.curve_se_share
+        spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0 + curve ** 2
+        confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2))
+        confidence *= input_quality.confidence_factor(self._input_share)
+        last = self._last_estimate
+        threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
+        if confidence < threshold or fit.mu_max < self._stop_floor() or not self._agrees_with_wheels(estimate, fit.mu_max):
+            return estimate
+        detail = dict(estimate.detail or {})
+        detail.update({"body_curve": 1.0, "body_sum_curve_se": fit.curve_se_share, "body_sum_rows": float(fit.rows)})
+        valid = FrictionEstimate(now_s, Status.VALID, fit.mu_max, fit.slip_star, estimate.theta, confidence,
+                                 (fit.mu_max,) * N_WHEELS, fit.mu_max * math.sqrt(spread2), detail)
+        self._not_valid = ""
+        self._last_valid = valid
+        self._last_excited_s = now_s
+        return valid
+
+    def _agrees_with_wheels(self, estimate: FrictionEstimate, mu_max: float) -> bool:
+        """Whether the wheels' fit, CONVERGING, puts the peak within `body_curve_agreement` of
+        the curve's. The two read one road's peak through different sensors; far apart, one of
+        them is fooled (a road changing within the window, a tyre's force lagging its slip, a
+        peak beyond the slips the wheels reached), and neither is claimed. Without a fit of the
+        wheels (NOT_EXCITED, a prior held) there is nothing to check the curve against."""
+        return (estimate.status == Status.CONVERGING
+                and abs(estimate.mu_max - mu_max) <= self.options.body_curve_agreement * mu_max)

@@ -79,7 +79,8 @@ class BodyCurveReport:
         confidence *= input_quality.confidence_factor(self._input_share)
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
-        if confidence < threshold or fit.mu_max < self._stop_floor() or not self._agrees_with_wheels(estimate, fit.mu_max):
+        if (not confidence >= threshold or not fit.mu_max >= self._stop_floor()
+                or not self._agrees_with_wheels(estimate, fit.mu_max)):
             return estimate
         detail = dict(estimate.detail or {})
         detail.update({"body_curve": 1.0, "body_sum_curve_se": fit.curve_se_share, "body_sum_rows": float(fit.rows)})

@@ -11,8 +11,9 @@ wheel on each side spent `span_share` of the window below 0.8 and past 1.2 times
 fitted peak slip: their μ passed over the peak, and the sum's top is the curves'. A slip
 controller holding its wheels short of the peak, or a gentle stop, sweeps no such span. Rows with
 a wheel far past the peak are left out, and a window made mostly of them (a threshold ABS) is
-fitted with a curve of no shape instead, which follows a tyre past its peak (`body_sum_curve`). The sum can trade one side's θ against the other's (on the campaign's
-split-μ stops the two fits swapped roads within a second), so it is evidence of one road only:
+fitted with a curve of no shape instead, which follows a tyre past its peak (`body_sum_curve`).
+The sum can trade one side's θ against the other's (on the campaign's split-μ stops the two fits
+swapped roads within a second), so it is evidence of one road only:
 the sides' peaks must agree within `max_side_ratio`, and so must the window's older and newer
 halves fitted apart (a change of road). Residuals above `max_rms_share` of μ_max mean the curves
 do not describe the wheels; residuals that grow with how deep the wheels are in slip
@@ -29,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .body_sum_curve import DRIFTING, NOT_IN_BOTH_HALVES, CurveSumFit, CurveSumOptions, curve_sum, fit_curve_sum
+from .body_sum_curve import DRIFTING, NOT_IN_BOTH_HALVES, CurveSumFit, curve_sum, fit_curve_sum
 from .samples import LEFT_WHEELS, N_WHEELS, RIGHT_WHEELS
 from .tyre_model import MAX_MODEL_SLIP, LugreParams, mu_and_jacobian_theta, peak, supported_slip
 

@@ -262,19 +262,20 @@ class BodySumFit:
         """The free curve's fit where most rows hold a wheel past twice the slip of the curve's own
         top (as `_fit` asks of the static curve's, without its Gauss–Newton solve); else `NOT_DEEP`."""
         o = self.options
-        star = fit_curve_sum(slips, shares, body).slip_star
-        near = (slips <= o.max_slip_ratio * star).all(axis=1)
+        curve = fit_curve_sum(slips, shares, body)
+        near = (slips <= o.max_slip_ratio * curve.slip_star).all(axis=1)
         if int(near.sum()) >= max(o.min_rows, o.min_near_share * len(body)):
             return BodySumResult(math.nan, math.nan, (math.nan,) * N_WHEELS, math.nan, 0.0, 0.0, (False,) * N_WHEELS,
                                  lateral_mu, len(body), NOT_DEEP)
-        return self._deep_fit(self._log_thetas, times, slips, shares, body, lateral_mu)
+        return self._deep_fit(self._log_thetas, times, slips, shares, body, lateral_mu, curve)
 
     def _deep_fit(self, x: np.ndarray, times: np.ndarray, slips: np.ndarray, shares: np.ndarray, body: np.ndarray,
-                  lateral_mu: float) -> BodySumResult:
-        """The free curve's fit where most rows hold a wheel far past the peak (`body_sum_curve`);
-        its verdict in words after "wheels deep past the peak"."""
+                  lateral_mu: float, curve: CurveSumFit | None = None) -> BodySumResult:
+        """The free curve's fit (`curve`, if already fitted to these rows) where most rows hold a
+        wheel far past the peak (`body_sum_curve`); its verdict in words after "wheels deep past
+        the peak"."""
         o = self.options
-        curve = fit_curve_sum(slips, shares, body)
+        curve = curve or fit_curve_sum(slips, shares, body)
         star = curve.slip_star
         period = float(np.median(np.diff(times)))
         rms_share = (_block_rms(curve_sum(curve.values, slips, shares) - body, o.misfit_block_s / max(period, 1e-6))

@@ -1,7 +1,8 @@
 """The car's total force beside the wheels' fit: where that fit is not VALID, the free curve of the
 body's force (`body_sum_curve`) may be.
 
-`BodyCurveReport` is a part of `LugreTrustRegionEstimator`. On a car whose wheels' brake torques
+`BodyCurveReport` is a part of `LugreTrustRegionEstimator` (beside `BodySumReport`, whose fit,
+drift and confidence it shares). On a car whose wheels' brake torques
 are known, the wheels' fit reads each wheel's μ from its torque balance: through the brakes' gain
 (±20 % off what the config says until the body equation corrects it) and through the derivative
 filter, whose mean over a sample's slips falls short of the curve where it bends at the top. Under
@@ -20,13 +21,8 @@ from __future__ import annotations
 import math
 from collections import deque
 
-from . import input_quality
-from .body_sum_fit import BodySumFit, BodySumOptions
+from .body_sum_fit import BodySumOptions
 from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
-from .tyre_model import LugreParams
-
-# The free curve's μ_max drift is read over this long (as the body sum's).
-DRIFT_WINDOW_S = 0.3
 
 
 class BodyCurveReport:
@@ -34,11 +30,7 @@ class BodyCurveReport:
     where the wheels' fit gives none (`_beside_body_curve`)."""
 
     def _init_body_curve(self) -> None:
-        o = self.options
-        shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
-                            alpha=o.alpha, patch_length=o.patch_length)
-        self._body_curve = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),
-                                      o.left_right_coupling, BodySumOptions(deep_only=True))
+        self._body_curve = self._new_body_fit(BodySumOptions(deep_only=True))
         self._body_curve_history: deque[tuple[float, float]] = deque()
 
     def _clear_body_curve(self) -> None:
@@ -54,29 +46,19 @@ class BodyCurveReport:
 
     def _beside_body_curve(self, estimate: FrictionEstimate, sample: PhysicalSample) -> FrictionEstimate:
         """`estimate` (the wheels' fit's, a restated or held one), or where it is not VALID the
-        free curve's, VALID, if that shows the peak with the confidence VALID needs: σ² as the
-        body sum's, `body_sum_mismatch`² + drift² + the accelerometer's and drag's doubt²/3 +
-        (`body_sum_curve_error_ratio` × the curve's standard error)²."""
+        free curve's, VALID, if that shows the peak with the confidence VALID needs (the body
+        sum's, `_body_confidence`)."""
         o = self.options
         now_s, speed = sample.time_s, sample.speed_mps
         if (estimate.status == Status.VALID or not o.body_curve_beside_wheels or sample.wheel_torques_unknown
                 or not speed >= o.peak_evidence_min_speed):
             return estimate
         fit = self._body_curve.result(now_s, speed)
-        history = self._body_curve_history
         if fit is None or fit.verdict:
-            history.clear()
+            self._body_curve_history.clear()
             return estimate
-        history.append((now_s, fit.mu_max))
-        while history and history[0][0] < now_s - DRIFT_WINDOW_S:
-            history.popleft()
-        scale = max(fit.mu_max, 0.05)
-        drift = (max(m for _, m in history) - min(m for _, m in history)) / scale
-        doubt = sample.body_force_doubt / scale
-        curve = o.body_sum_curve_error_ratio * fit.curve_se_share
-        spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0 + curve ** 2
-        confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2))
-        confidence *= input_quality.confidence_factor(self._input_share)
+        drift = self._body_drift(self._body_curve_history, now_s, fit.mu_max)
+        confidence, spread2 = self._body_confidence(fit.mu_max, drift, fit, sample.body_force_doubt)
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
         if (not confidence >= threshold or not fit.mu_max >= self._stop_floor()

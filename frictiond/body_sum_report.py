@@ -15,7 +15,7 @@ import math
 from collections import deque
 
 from . import input_quality, not_valid
-from .body_sum_fit import CURVE_LOST, MISFIT, ROAD_CHANGE, BodySumFit, BodySumOptions
+from .body_sum_fit import CURVE_LOST, MISFIT, ROAD_CHANGE, BodySumFit, BodySumOptions, BodySumResult
 from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
 from .tyre_model import LugreParams
 
@@ -28,15 +28,43 @@ class BodySumReport:
 
     def _init_body_sum(self) -> None:
         o = self.options
-        shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
-                            alpha=o.alpha, patch_length=o.patch_length)
-        self._body_sum = BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),
-                                    o.left_right_coupling,
-                                    BodySumOptions(peak_extrapolation=o.peak_extrapolation,
-                                                   extrapolation_max_slip=o.extrapolation_max_slip,
-                                                   deep_curve=o.body_sum_curve))
+        self._body_sum = self._new_body_fit(BodySumOptions(peak_extrapolation=o.peak_extrapolation,
+                                                           extrapolation_max_slip=o.extrapolation_max_slip,
+                                                           deep_curve=o.body_sum_curve))
         self._body_sum_history: deque[tuple[float, float]] = deque()
         self._body_force_doubt = 0.0   # the newest row's (`PhysicalSample.body_force_doubt`)
+
+    def _new_body_fit(self, fit_options: BodySumOptions) -> BodySumFit:
+        """A fit of the car's total force on the estimator's priors: the static curve's shape, θ
+        and its bounds, the sides' coupling."""
+        o = self.options
+        shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
+                            alpha=o.alpha, patch_length=o.patch_length)
+        return BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),
+                          o.left_right_coupling, fit_options)
+
+    @staticmethod
+    def _body_drift(history: deque[tuple[float, float]], now_s: float, mu_max: float) -> float:
+        """`mu_max` into `history` (its last `DRIFT_WINDOW_S` kept), and how far the fits' μ_max
+        moved over that: the largest change, as a share of μ_max."""
+        history.append((now_s, mu_max))
+        while history and history[0][0] < now_s - DRIFT_WINDOW_S:
+            history.popleft()
+        return (max(m for _, m in history) - min(m for _, m in history)) / max(mu_max, 0.05)
+
+    def _body_confidence(self, mu_max: float, drift: float, fit: BodySumResult, doubt: float) -> tuple[float, float]:
+        """(confidence, σ²) of a body fit's `mu_max`: the probability of μ_max within
+        `confidence_band` under a normal error of σ² = `body_sum_mismatch`² + `drift`² + (the
+        accelerometer's and the drag's `doubt` over μ_max)²/3 + (`misfit_peak_ratio` × the
+        residuals' rise, if positive)² + (`body_sum_curve_error_ratio` × the free curve's standard
+        error)², less what corrupted input costs."""
+        o = self.options
+        rise = o.misfit_peak_ratio * max(fit.rise_share, 0.0)
+        curve = o.body_sum_curve_error_ratio * fit.curve_se_share
+        spread2 = (o.body_sum_mismatch ** 2 + drift ** 2 + (doubt / max(mu_max, 0.05)) ** 2 / 3.0 + rise ** 2
+                   + curve ** 2)
+        confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
+        return confidence * input_quality.confidence_factor(self._input_share), spread2
 
     def _clear_body_sum(self) -> None:
         self._body_sum.clear()
@@ -56,23 +84,13 @@ class BodySumReport:
         if fit is None:
             return None
         mu_max = max(fit.mu_max, self._body_floor(now_s))   # (no road gives less than the car just used)
-        history = self._body_sum_history
-        history.append((now_s, mu_max))
-        while history and history[0][0] < now_s - DRIFT_WINDOW_S:
-            history.popleft()
+        drift = self._body_drift(self._body_sum_history, now_s, mu_max)
         if speed < o.peak_evidence_min_speed:
             # A stop ending, where slips are no evidence: a VALID standing is held, as the
             # wheels' fit's; without one, this stop's last fit stands, CONVERGING (`_starved`),
             # not the prior: the wheels were braked past the slip excursion NOT_EXCITED denies.
             return self._starved(now_s, speed)
-        scale = max(mu_max, 0.05)
-        drift = (max(m for _, m in history) - min(m for _, m in history)) / scale
-        doubt = self._body_force_doubt / scale
-        rise = o.misfit_peak_ratio * max(fit.rise_share, 0.0)
-        curve = o.body_sum_curve_error_ratio * fit.curve_se_share
-        spread2 = o.body_sum_mismatch ** 2 + drift ** 2 + doubt ** 2 / 3.0 + rise ** 2 + curve ** 2
-        confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
-        confidence *= input_quality.confidence_factor(self._input_share)
+        confidence, spread2 = self._body_confidence(mu_max, drift, fit, self._body_force_doubt)
         detail = {"body_sum": 1.0, "body_sum_rms": fit.rms_share, "body_sum_rise": fit.rise_share,
                   "body_sum_curve_se": fit.curve_se_share,
                   "body_sum_spanning": float(sum(fit.spans)), "body_sum_rows": float(fit.rows)}

@@ -32,14 +32,14 @@ The excitation evidence is `peak_evidence.PeakEvidence`, the confidence and the 
 `estimate_report.EstimateReport`, the fit itself `window_fit.WindowFit` and the change of road
 read from its residuals `road_change.RoadChangeTest`, the parameter vector and its mapping to
 the tyre model's parameters `fit_parameters.FitParameters`, the brake-gain balance between the
-axles `axle_balance.AxleBalance`: parts of the estimator class, each in its own module.
+axles `axle_balance.AxleBalance`, the state that a reset sets up, a new braking event or a clock
+step forgets and a restart loads `estimator_state.EstimatorState`: parts of the estimator class,
+each in its own module. The window of samples the fit reads is `estimator_window._Window`.
 """
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, fields
-from typing import Any
 
 import numpy as np
 
@@ -51,20 +51,19 @@ except ImportError:  # pragma: no cover - depends on the install
     compiled_fit = None
 from . import not_valid
 from .samples import N_WHEELS, FrictionEstimate, PhysicalSample, Status
-from .speed_error import SpeedErrorBound, SpeedErrorOptions
-from .tyre_model import MAX_MODEL_SLIP, LugreParams, braking_mu_and_partials, mu_and_jacobian_theta
+from .tyre_model import mu_and_jacobian_theta
 from .vehicle import VehicleParams
 from .axle_balance import AxleBalance
 from .body_curve_report import BodyCurveReport
 from .body_sum_report import BodySumReport
 from .estimate_confidence import EstimateConfidence
 from .estimate_report import EstimateReport
-from .fit_parameters import FitParameters
+from .estimator_state import EstimatorState
+from .estimator_window import _spread_loss_numpy, _Window  # noqa: F401 (_Window re-exported for the tests)
+from .fit_parameters import SHARED, FitParameters  # noqa: F401 (SHARED re-exported)
 from .peak_evidence import PeakEvidence
 from .stop_fit import StopFit
 from .window_fit import WindowFit
-
-SHARED = ("sigma0", "v_s", "sigma2")
 
 
 @dataclass(frozen=True, slots=True)
@@ -256,198 +255,8 @@ class LugreTROptions:
             raise ValueError("theta_min: must be > 0")
 
 
-class _Window:
-    """Preallocated ring of samples (slip, speed, μ, time, wheel); amortised O(1) append.
-
-    Next to each sample it keeps the parts of the model that depend on the sample alone (with
-    the held α and L): λ·v, (λ·v)^α and L·λ/(1−λ); and, in
-    `rows`, the unweighted Jacobian row and model − measurement of each sample at the
-    parameters of the last accepted fit (valid for the samples before `cached_end`).
-    """
-
-    def __init__(self, capacity: int = 4096, alpha: float = 0.5, patch_length: float = 0.2) -> None:
-        self.capacity = capacity
-        self.alpha = alpha
-        self.patch_length = patch_length
-        self.slip = np.empty(capacity)
-        self.speed = np.empty(capacity)
-        self.mu = np.empty(capacity)
-        # Per sample: the slips at the derivative window's ends and their weights (`slip_spread`).
-        self.spread = np.zeros((4, capacity))
-        self.time = np.empty(capacity)
-        self.wheel = np.empty(capacity, dtype=np.intp)
-        self.lam_v = np.empty(capacity)
-        self.pow_lam_v = np.empty(capacity)
-        self.stiff = np.empty(capacity)
-        self.rows = np.empty((N_WHEELS + len(SHARED) + 1, capacity))
-        # The compiled fit's cache of the same: per sample its 5 unweighted row values at the
-        # parameters `LugreTrustRegionEstimator._core_rows_x`, valid before `core_cached_end`.
-        self.core_rows = np.empty((capacity, 5))
-        self.core_cached_end = 0
-        # The compiled fit's buffers: the weighted residuals, a trial's, the forgetting weights
-        # and the rows' weights √w/σ.
-        self.scratch = np.empty((4, capacity))
-        self.start = 0
-        self.end = 0
-        self.cached_end = 0
-        self.last_time_by_axle = [-math.inf, -math.inf]   # newest sample of a front / rear wheel
-        # The columns `_fitcore.fit_window` reads and writes (never reallocated: `_compact` moves
-        # samples within them).
-        self.core_columns = (self.pow_lam_v, self.stiff, self.lam_v, self.mu, self.wheel, self.time, self.scratch,
-                             self.core_rows)
-        self.append_columns = (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v,
-                               self.stiff)
-
-    def __len__(self) -> int:
-        return self.end - self.start
-
-    def clear(self) -> None:
-        self.start = self.end = self.cached_end = self.core_cached_end = 0
-        self.last_time_by_axle = [-math.inf, -math.inf]
-
-    def has_recent(self, axle: int, since_s: float) -> bool:
-        """Whether the window holds a sample of the axle (0 front, 1 rear) newer than `since_s`."""
-        t = self.last_time_by_axle[axle]
-        return t > since_s and self.end > self.start and t >= self.time.item(self.start)
-
-    def _compact(self) -> None:
-        """Move the window's samples to the front of the columns."""
-        n = len(self)
-        s, e = self.start, self.end
-        for arr in (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v, self.stiff):
-            arr[:n] = arr[s:e]
-        self.spread[:, :n] = self.spread[:, s:e]
-        self.rows[:, :n] = self.rows[:, s:e]
-        self.core_rows[:n] = self.core_rows[s:e]
-        self.cached_end = max(self.cached_end - s, 0)
-        self.core_cached_end = max(self.core_cached_end - s, 0)
-        self.start, self.end = 0, n
-
-    def append(self, slip: float, speed: float, mu: float, time_s: float, wheel: int) -> None:
-        if self.end == self.capacity:
-            self._compact()
-            if self.end == self.capacity:
-                # Full (a long window_s at a high rate): the oldest quarter goes, and its room
-                # is made free again.
-                self.start = self.capacity // 4
-                self._compact()
-        k = self.end
-        self.slip[k], self.speed[k], self.mu[k], self.time[k], self.wheel[k] = slip, speed, mu, time_s, wheel
-        self.spread[:, k] = 0.0
-        lam = min(slip, MAX_MODEL_SLIP)
-        lam_v = lam * speed
-        self.lam_v[k] = lam_v
-        self.pow_lam_v[k] = lam_v**self.alpha if lam_v > 0 else 0.0
-        self.stiff[k] = self.patch_length * lam / (1.0 - lam)
-        self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
-        self.end += 1
-
-    def append_instant(self, slips: list[float], speed: float, mus: list[float], time_s: float,
-                       wheels: list[int], core: Any = None) -> None:
-        """`append` of one instant's samples (a few wheels), in one compiled call when `core` is given."""
-        n = len(slips)
-        if core is None or self.end + n > self.capacity:
-            for slip, mu, wheel in zip(slips, mus, wheels):
-                self.append(slip, speed, mu, time_s, wheel)
-            return
-        core.append_samples(self.append_columns, self.end, slips, speed, mus, time_s, wheels, self.alpha,
-                            self.patch_length, MAX_MODEL_SLIP)
-        self.spread[:, self.end:self.end + n] = 0.0
-        for wheel in wheels:
-            self.last_time_by_axle[0 if wheel < 2 else 1] = time_s
-        self.end += n
-
-    def set_spread(self, n: int, spreads: list[tuple[float, float]], weights: tuple[float, float]) -> None:
-        """The derivative-window slips (`slip_spread`) of the newest `n` samples, one pair each."""
-        spread = self.spread
-        a_lo, a_hi = weights
-        k = self.end - n
-        for lo, hi in spreads:   # (a few wheels: scalar stores cost less than building arrays)
-            spread[0, k] = lo
-            spread[1, k] = hi
-            spread[2, k] = a_lo
-            spread[3, k] = a_hi
-            k += 1
-
-    def drop_before(self, time_s: float, core: Any = None) -> None:
-        if core is not None:
-            self.start = core.search_left(self.time, self.start, self.end, time_s)
-            return
-        times = self.time[self.start:self.end]
-        self.start += int(times.searchsorted(time_s, side="left"))
-
-    def view(self) -> tuple[np.ndarray, ...]:
-        s = slice(self.start, self.end)
-        return self.slip[s], self.speed[s], self.mu[s], self.time[s], self.wheel[s]
-
-
-def _spread_loss_numpy(w: _Window, lo: int, thetas: list[float], params: LugreParams) -> float:
-    """`LugreTrustRegionEstimator._spread_loss` over the window's samples from `lo` (`_fitcore.spread_loss`)."""
-    hi = w.end
-    rows = np.flatnonzero(w.spread[2, lo:hi] + w.spread[3, lo:hi] > 0.0) + lo
-    wheel, mu = w.wheel[rows], w.mu[rows]
-    top = np.zeros(len(rows), dtype=bool)
-    for i in range(N_WHEELS):
-        mine = wheel == i
-        if np.count_nonzero(mine) >= 3:
-            top |= mine & (mu >= 0.9 * mu[mine].max())
-    rows = rows[top]
-    n = len(rows)
-    if n == 0:
-        return 0.0
-    theta = np.asarray(thetas)[w.wheel[rows]]
-    lam = np.concatenate((w.slip[rows], w.spread[0, rows], w.spread[1, rows]))
-    model = braking_mu_and_partials(lam, np.tile(w.speed[rows], 3), np.tile(theta, 3), params, np.empty((3 * n, 4)))
-    centre = model[:n]
-    loss = w.spread[2, rows] * (centre - model[n:2 * n]) + w.spread[3, rows] * (centre - model[2 * n:])
-    share = float(np.mean(loss / np.maximum(centre, 0.05)))
-    return share if share > 0.0 else 0.0
-
-
-class _SmoothedMaximum:
-    """The maximum, over a trailing span, of a series' mean over `smoothing_s`: O(1) a sample
-    (a running sum for the mean, a monotonic queue for the maximum)."""
-
-    def __init__(self, smoothing_s: float) -> None:
-        self.smoothing_s = smoothing_s
-        self._raw: deque[tuple[float, float]] = deque()
-        self._sum = 0.0
-        self.highest = 0.0          # the highest mean since the last clear
-        self._means: deque[tuple[float, float]] = deque()   # (time, mean), means decreasing
-
-    def push(self, time_s: float, value: float) -> None:
-        raw = self._raw
-        if raw and time_s < raw[-1][0]:
-            self.clear()            # the clock went back
-        raw.append((time_s, value))
-        self._sum += value
-        while raw[0][0] < time_s - self.smoothing_s:
-            self._sum -= raw.popleft()[1]
-        if time_s - raw[0][0] < 0.5 * self.smoothing_s:
-            return                  # not yet a mean over the span
-        mean = self._sum / len(raw)
-        if mean > self.highest:
-            self.highest = mean
-        means = self._means
-        while means and means[-1][1] <= mean:
-            means.pop()
-        means.append((time_s, mean))
-
-    def maximum(self, since_s: float) -> float | None:
-        means = self._means
-        while means and means[0][0] < since_s:
-            means.popleft()
-        return means[0][1] if means else None
-
-    def clear(self) -> None:
-        self._raw.clear()
-        self._means.clear()
-        self._sum = 0.0
-        self.highest = 0.0
-
-
 class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, EstimateReport, FitParameters,
-                                AxleBalance, BodySumReport, BodyCurveReport, StopFit):
+                                AxleBalance, BodySumReport, BodyCurveReport, StopFit, EstimatorState):
     """Recursive, bounded trust-region NLLS fit of static LuGre; one `update` per bus cycle."""
 
     kind = "lugre-tr"
@@ -484,134 +293,6 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         self._gradient_buffer, self._normal_buffer = np.empty(len(self._scale)), np.empty((len(self._scale),) * 2)
         # The compiled fit when installed; `None` runs the numpy path (tests, benchmarks compare).
         self.core = compiled_fit
-        self.reset()
-
-    # ------------------------------------------------------------------------------ state
-    def reset(self) -> None:
-        o = self.options
-        nominal = np.array([math.log(o.prior_theta)] * N_WHEELS + [o.prior_sigma0, o.prior_v_s, o.prior_sigma2]) / self._scale
-        self._prior = self._saved_prior.copy() if self._saved_prior is not None else nominal
-        self._x = self._prior.copy()
-        self._radius: float | None = None
-        self._window = _Window(self._window_capacity, alpha=o.alpha, patch_length=o.patch_length)
-        self._cache_x: np.ndarray | None = None
-        self._core_rows_x: np.ndarray | None = None
-        self._last_valid: FrictionEstimate | None = None
-        self._valid_since_s = math.inf   # when the standing run of VALID began (`_excitation_hold`)
-        self._last_excited_s = -math.inf
-        self._last_estimate: FrictionEstimate | None = None
-        self._withdrawn_moving_s = -math.inf   # the last non-VALID update at a speed with evidence (`_hold`)
-        self._stop_fit: FrictionEstimate | None = None   # this stop's last fit (`_starved`)
-        self._last_braking_s = -math.inf
-        self._fits = 0
-        self._event_first_fit = self._spread_loss_fit = 0   # `_fits` at the event's start, at the last spread loss
-        self._peak_spread_loss = 0.0
-        self._jumps = 0
-        self._jump_times: deque[float] = deque()
-        self._axle_balance = 0.0
-        self._axle_scales_cache: tuple[float, tuple[float, float]] = (math.nan, (1.0, 1.0))
-        self._last_sample_s = -math.inf
-        self._residual_scale = 1.0
-        self._input_share = 0.0   # the newest sample's share of corrupted input (input_quality)
-        self._brake_gain_doubt = 0.0   # the newest sample's `brake_gain_doubt` (`_confidence`)
-        self._lateral_mu = 0.0         # the tyres' lateral μ, averaged (`_follow_lateral`)
-        self._lateral_time_s = -math.inf
-        self._lateral_doubt = 0.0      # the share of μ_max the lateral μ's tolerance could take off
-        self._load_share = [1.0 / N_WHEELS] * N_WHEELS
-        self._mu_history: deque[tuple[float, float]] = deque()
-        self._excitation_cache: float | None = None
-        self._excitation_why: list = ["", "", "", ""]
-        self._not_valid = ""          # why the last update's estimate is not VALID (`not_valid`)
-        self._data_above_fit = 0.0
-        self._numpy_residuals: np.ndarray | None = None
-        self._innovation_score = 0.0
-        self._front_innovation_score = 0.0
-        self._last_jump_s = -math.inf
-        self._rear_straddles_until_s = -math.inf   # (`_detect_jump`: the rear axle crossing a change of road)
-        self._last_peak_slips: list[float] | None = None
-        self._slip_support: list[float] | None = None
-        self._capped: np.ndarray | None = None
-        self._slip_floor = [0.0] * N_WHEELS
-        self._excited_since_s = math.inf
-        self._peak_seen_speed = 0.0
-        self._abs_seen_s = [-math.inf] * N_WHEELS
-        self._speed_error = SpeedErrorBound(SpeedErrorOptions(
-            o.speed_error_mps, o.speed_drift_mps2, o.speed_anchor_slip, o.excitation_window_s))
-        self._forget_shown_peaks()
-        self._forget_runaways()
-        self._body_mu = _SmoothedMaximum(self.options.body_floor_smoothing_s)
-        self._measured_peaks = [0.0] * N_WHEELS
-        self._band_ratio = 0.0
-        self._event_start_s = -math.inf
-        self._last_fit_s = -math.inf
-        self._last_update_s: float | None = None
-        self._cov_unit: np.ndarray | None = None
-        self._init_body_sum()
-        self._init_body_curve()
-
-    def _new_event(self) -> None:
-        """The first samples after the window ran empty: a new braking event begins.
-
-        The fitted parameters stay (a warm start and prior: the road is usually the same), but
-        all evidence derived from the previous event's samples is forgotten: the cached
-        excitation, covariance and slip support, the μ_max history behind the drift term and the
-        start of the excitation ramp. Otherwise the first fits of the new event, before its data
-        reach the peak, would be reported VALID on the old event's evidence (with the old road's
-        μ_max, on what may be a new surface). A VALID still held from the last event (`hold_s`)
-        is left to expire as usual, but it is no longer renewed by stale excitation.
-        """
-        self._excitation_cache = None
-        self._excitation_why: list = ["", "", "", ""]
-        self._data_above_fit = 0.0
-        self._event_first_fit = self._spread_loss_fit = self._fits
-        self._peak_spread_loss = 0.0
-        self._event_start_s = self._last_sample_s
-        self._cov_unit = None
-        self._slip_support = None
-        self._capped = None
-        self._mu_history.clear()
-        self._body_mu.clear()
-        self._excited_since_s = math.inf
-        self._peak_seen_speed = 0.0
-        self._forget_runaways()
-        self._forget_shown_peaks()
-        self._innovation_score = 0.0
-        self._front_innovation_score = 0.0
-        self._radius = None
-        self._last_update_s = None
-        self._jump_times.clear()
-
-    def state(self) -> dict[str, Any]:
-        """JSON-serialisable: fitted parameters and the last valid estimate (a prior for a restart)."""
-        params = self._thetas(self._x).tolist() + (self._x[N_WHEELS:] * self._scale[N_WHEELS:]).tolist()
-        last = self._last_valid
-        return {
-            "kind": self.kind,
-            "parameters": dict(zip([f"theta_{w}" for w in ("fl", "fr", "rl", "rr")] + list(SHARED), params)),
-            "last_valid": None if last is None else {
-                "mu_max": last.mu_max, "slip_at_mu_max": last.slip_at_mu_max, "theta": last.theta,
-                "wheel_mu_max": list(last.wheel_mu_max), "time_s": last.time_s,
-            },
-        }
-
-    def load_state(self, state: dict[str, Any]) -> None:
-        """Use saved parameters as the prior and starting point; `ValueError` on bad content."""
-        if not isinstance(state, dict) or state.get("kind") != self.kind:
-            raise ValueError("state is not from the lugre-tr estimator")
-        params = state.get("parameters")
-        names = [f"theta_{w}" for w in ("fl", "fr", "rl", "rr")] + list(SHARED)
-        if not isinstance(params, dict) or any(n not in params for n in names):
-            raise ValueError("state lacks fitted parameters")
-        values = []
-        for n in names:
-            v = params[n]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"state parameter {n} is not a finite number")
-            if n.startswith("theta_") and v <= 0:
-                raise ValueError(f"state parameter {n} must be > 0")
-            values.append(math.log(v) if n.startswith("theta_") else float(v))
-        x = np.clip(np.array(values) / self._scale, self._lb, self._ub)
-        self._saved_prior = x
         self.reset()
 
     # ----------------------------------------------------------------------------- update
@@ -692,30 +373,6 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         keep = math.exp(-age / self.options.forgetting_time_constant) if age >= 0.0 else 0.0
         self._lateral_mu = keep * self._lateral_mu + (1.0 - keep) * lateral_mu
         self._lateral_time_s = t
-
-    def _restart_after_clock_step(self, t: float) -> None:
-        """The clock went backwards (log splice, clock step): the window's samples would get
-        weights from the future. Start the window again; the fitted parameters stay."""
-        self._window.clear()
-        self._mu_history.clear()
-        self._clear_body_sum()
-        self._clear_body_curve()
-        self._last_update_s = None
-        self._stop_fit = None
-        self._last_braking_s = -math.inf
-        # The times kept as anchors (last excitation, last jump) are from the old clock: left
-        # there, `now − last excitation` would stay negative, and a VALID would be held for as
-        # long as the clock went back (hours of free rolling) instead of `hold_s`. Carry them
-        # over the step, as if one bus period had passed.
-        step = t - self._last_sample_s - 0.01
-        if math.isfinite(self._last_excited_s):
-            self._last_excited_s += step
-        if math.isfinite(self._last_jump_s):
-            self._last_jump_s += step
-        if math.isfinite(self._rear_straddles_until_s):
-            self._rear_straddles_until_s += step
-        self._speed_error.shift(step)
-        self._excited_since_s = math.inf
 
     def _take_in(self, sample: PhysicalSample) -> int:
         """The sample's usable wheels into the window (each wheel's μ corrected for the axles'
@@ -799,7 +456,3 @@ class LugreTrustRegionEstimator(WindowFit, PeakEvidence, EstimateConfidence, Est
         slip = np.asarray(slip, dtype=float)
         value, _ = mu_and_jacobian_theta(slip, np.full_like(slip, speed_mps), np.full_like(slip, theta), p, ("theta",))
         return value
-
-    @property
-    def parameters(self) -> dict[str, float]:
-        return self.state()["parameters"]

@@ -16,6 +16,9 @@ import numpy as np
 from .samples import N_WHEELS
 from .tyre_model import LugreParams
 
+# The parameters pooled over the wheels, in their order in x after the wheels' ln θ.
+SHARED = ("sigma0", "v_s", "sigma2")
+
 
 class FitParameters:
     """The fit's parameter space (`_init_parameter_space`) and the mapping from x to the tyre

@@ -85,7 +85,8 @@ class BodySumResult:
     residuals' rms over μ_max, how far the residuals rise from the rows of shallow slips to the
     deep ones (over μ_max: `_rise`), which wheels spanned the fitted peak, the window's largest
     lateral μ, the rows fitted, and why it does not show the peak ("" when it does); from the free
-    curve (`body_sum_curve`), its peak's standard error over μ_max (0 from the static curve)."""
+    curve (`body_sum_curve`), its peak's standard error over μ_max (0 from the static curve) and
+    the highest mean of the body's μ over `misfit_block_s` among its rows (0 from the static curve)."""
     mu_max: float
     slip_star: float
     wheel_slip_star: tuple[float, ...]
@@ -97,6 +98,7 @@ class BodySumResult:
     rows: int
     verdict: str
     curve_se_share: float = 0.0
+    window_utilisation: float = 0.0
 
 
 class BodySumFit:
@@ -293,8 +295,10 @@ class BodySumFit:
             verdict = ""
             self._last_curve = curve
         self._log_thetas = x
+        rows_per_block = max(1, int(round(o.misfit_block_s / max(period, 1e-6))))
+        utilisation = float(np.convolve(body, np.full(rows_per_block, 1.0 / rows_per_block), "valid").max())
         return BodySumResult(curve.mu_max, star, (star,) * N_WHEELS, float(np.exp(x).mean()), rms_share, 0.0,
-                             tuple(spans.tolist()), lateral_mu, len(body), verdict, curve.se_share)
+                             tuple(spans.tolist()), lateral_mu, len(body), verdict, curve.se_share, utilisation)
 
     def _held_within_data(self, x: np.ndarray, wheel_mu: np.ndarray, wheel_slip: np.ndarray, support: np.ndarray,
                           speed: float) -> np.ndarray:

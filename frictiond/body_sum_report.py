@@ -66,6 +66,19 @@ class BodySumReport:
         confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
         return confidence * input_quality.confidence_factor(self._input_share), spread2
 
+    def _body_fit_floor(self, fit: BodySumResult) -> float:
+        """The least μ_max VALID allows a body fit: the stop's floor (`_stop_floor`), or for the
+        free curve the same rule on the utilisation within its own window. The stop's floor guards
+        against a fit that has forgotten the peak the car used, its wheels held deep in slip since;
+        a free curve that shows the peak has its top read in both halves of its window
+        (`body_sum_curve`), so that peak is in its rows, and what the car used before them may
+        have been another road's (dev stops 172 and 490: the grip used on a dry road held a wet
+        road's curve, within 2 % of the truth, from VALID for the rest of the stop)."""
+        if fit.curve_se_share <= 0.0:
+            return self._stop_floor()
+        used = self._less_accelerometer_margins(fit.window_utilisation - self._body_force_doubt)
+        return used * (1.0 - self.options.stop_floor_tolerance)
+
     def _clear_body_sum(self) -> None:
         self._body_sum.clear()
         self._body_sum_history.clear()
@@ -105,7 +118,7 @@ class BodySumReport:
                 return self._hold(now_s, speed)
             self._not_valid = not_valid.body_sum_reason(fit.verdict)
             confidence = 0.0
-        elif mu_max < self._stop_floor():
+        elif mu_max < self._body_fit_floor(fit):
             self._not_valid = not_valid.BELOW_STOP_FLOOR
             confidence = min(confidence, 0.5 * threshold)
         elif confidence < threshold:

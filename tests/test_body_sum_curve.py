@@ -1,13 +1,14 @@
 """The free curve of the car's total tyre force (`body_sum_curve`), where the wheels run deep past
 their peaks, and the estimate the body sum gives from it. The truths are Magic Formula and
 Burckhardt curves, not a piecewise-linear curve nor the estimator's LuGre."""
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from frictiond.body_sum_curve import AT_EDGE, DRIFTING, FEW_ROWS, NO_FALL, NOT_IN_BOTH_HALVES, fit_curve_sum
-from frictiond.body_sum_fit import CURVE_LOST
+from frictiond.body_sum_fit import CURVE_LOST, BodySumResult
 from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
 from frictiond.samples import PhysicalSample, Status
 
@@ -150,6 +151,42 @@ def test_a_valid_from_the_curve_goes_at_once_when_the_curve_stops_showing_the_pe
     after = [i for i in range(200, len(estimates)) if estimates[i].status != Status.VALID]
     assert after and after[0] <= 200 + 6   # (the next fit, every 0.05 s)
     assert CURVE_LOST in reasons[after[0]]
+
+
+
+def test_grip_used_on_a_road_before_the_curves_window_does_not_hold_its_peak_from_valid():
+    """A dry road's grip used early in the stop (its μ 0.95, while the brakes' torques were still
+    known), then a wet road under a threshold ABS (peak 0.4). The stop's floor would bar the wet
+    curve's peak (it is far below what the car used); the free curve's top is in its own rows, so
+    only what the car used within its window bounds it."""
+    wet = lambda slip: magic_formula(slip, d=0.4)   # noqa: E731
+    peak, _ = peak_of(wet)
+    dry_braking = [PhysicalSample(time_s=k / RATE_HZ, speed_mps=30.0, slip=(0.05,) * 4, mu_used=(math.nan,) * 4,
+                                  normal_force_n=tuple(LOADS.tolist()), tyre_force_n=(0.0,) * 4,
+                                  usable=(False,) * 4, braking=True, body_mu=0.95, body_force_mu=0.95,
+                                  wheel_torques_unknown=False)
+                   for k in range(50)]
+    wet_abs = [dataclasses.replace(s, time_s=s.time_s + 0.5) for s in body_samples(wet, threshold_abs_slips)]
+    estimator = LugreTrustRegionEstimator()
+    estimates = [estimator.update(s) for s in dry_braking + wet_abs]
+    assert estimator._stop_floor() > 1.5 * peak   # (the dry road's grip, less its tolerance)
+    valid = [e for e in estimates if e.status == Status.VALID]
+    assert len(valid) > 0.3 * len(wet_abs)
+    assert all(abs(e.mu_max / peak - 1.0) < 0.1 for e in valid)
+
+
+def test_a_free_curve_under_what_the_car_used_within_its_window_is_below_the_floor():
+    """The floor a body fit must reach: the stop's for the static curve, the window's own
+    utilisation (less the accelerometer's margins and the tolerance) for the free curve."""
+    estimator = LugreTrustRegionEstimator()
+    o = estimator.options
+    static = BodySumResult(0.5, 0.1, (0.1,) * 4, 1.0, 0.0, 0.0, (True,) * 4, 0.0, 100, "")
+    curve = dataclasses.replace(static, curve_se_share=0.02, window_utilisation=0.6)
+    for k in range(10):
+        estimator._body_mu.push(0.01 * k, 0.9)
+    assert estimator._body_fit_floor(static) == estimator._stop_floor() > 0.6
+    used = 0.6 * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
+    assert estimator._body_fit_floor(curve) == pytest.approx(used * (1.0 - o.stop_floor_tolerance))
 
 
 def wheel_and_body_samples(curve, slips_of, wheel_scale=1.0, wheel_noise=0.12, seconds=3.0, seed=7):

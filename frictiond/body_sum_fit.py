@@ -18,8 +18,10 @@ the sides' peaks must agree within `max_side_ratio`, and so must the window's ol
 halves fitted apart (a change of road). Residuals above `max_rms_share` of μ_max mean the curves
 do not describe the wheels; residuals that grow with how deep the wheels are in slip
 (`BodySumResult.rise_share`) mean the tyre's force still rises where the fitted curve tops out, so
-its peak is beyond the fit's (the report counts that in its confidence); in a turn
-(`max_lateral_mu`) the tyres' lateral force takes grip the sum does not see. Pure numerics: nothing of CAN or of the front end.
+its peak is beyond the fit's (the report counts that in its confidence); in a turn the tyres'
+lateral force takes grip the sum does not see: beyond `max_lateral_mu`, and `max_lateral_share`
+of the peak where the report adds the lateral μ back (the friction circle), no peak is shown.
+Pure numerics: nothing of CAN or of the front end.
 """
 from __future__ import annotations
 
@@ -72,7 +74,8 @@ class BodySumOptions:
     misfit_block_s: float = 0.05     # ... the rms of their means over this long (the accelerometer's noise averaged)
     innovation_window_s: float = 0.1  # a change of road: the newest this long of rows ...
     max_innovation_share: float = 0.1  # ... off the last fit by this share of its μ_max on average
-    max_lateral_mu: float = 0.05     # going straight: the window's lateral μ at most this
+    max_lateral_mu: float = 0.05     # going straight: the window's lateral μ at most this ...
+    max_lateral_share: float = 0.0   # ... or this share of the fitted peak (a turn the report reads by the friction circle)
     peak_extrapolation: float = 1.6  # a wheel's peak is not read beyond this multiple of its slips fitted ...
     extrapolation_max_slip: float = 0.3  # ... nor beyond this slip where they did not go (the wheels' rule)
     deep_curve: bool = True          # a window mostly of wheels deep past the peak: the free curve's (`body_sum_curve`)
@@ -253,7 +256,7 @@ class BodySumFit:
             verdict = SIDES_DIFFER
         elif rms_share > o.max_rms_share or self._halves_differ(x, times, speed, slips, shares, body, speed_now):
             verdict = MISFIT
-        elif lateral_mu > o.max_lateral_mu:
+        elif self._turning(lateral_mu, mu_max):
             verdict = "turning"
         return BodySumResult(mu_max, float(share @ wheel_slip), tuple(wheel_slip.tolist()), float(np.exp(x).mean()),
                              rms_share, rise_share,
@@ -289,7 +292,7 @@ class BodySumFit:
             verdict = MISFIT
         elif curve.verdict:
             verdict = f"wheels deep past the peak; {curve.verdict}"
-        elif lateral_mu > o.max_lateral_mu:
+        elif self._turning(lateral_mu, curve.mu_max):
             verdict = "turning"
         else:
             verdict = ""
@@ -299,6 +302,17 @@ class BodySumFit:
         utilisation = float(np.convolve(body, np.full(rows_per_block, 1.0 / rows_per_block), "valid").max())
         return BodySumResult(curve.mu_max, star, (star,) * N_WHEELS, float(np.exp(x).mean()), rms_share, 0.0,
                              tuple(spans.tolist()), lateral_mu, len(body), verdict, curve.se_share, utilisation)
+
+    def _turning(self, lateral_mu: float, mu_max: float) -> bool:
+        """Whether the window's lateral μ is beyond both `max_lateral_mu` and `max_lateral_share`
+        of the fitted peak. Each tyre carries its load's share of the car's lateral force, so on one
+        road every tyre has the same share of its grip left for the longitudinal force the sum
+        measures: the curve is the road's scaled down, and the friction circle gives the road's
+        peak back. How far a tyre's lateral grip differs from its longitudinal one (an ellipse)
+        is unknown; its error grows with the lateral share, 4 % at half with a lateral grip 13 %
+        short."""
+        o = self.options
+        return lateral_mu > max(o.max_lateral_mu, o.max_lateral_share * mu_max)
 
     def _held_within_data(self, x: np.ndarray, wheel_mu: np.ndarray, wheel_slip: np.ndarray, support: np.ndarray,
                           speed: float) -> np.ndarray:

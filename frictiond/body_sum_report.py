@@ -30,7 +30,9 @@ class BodySumReport:
         o = self.options
         self._body_sum = self._new_body_fit(BodySumOptions(peak_extrapolation=o.peak_extrapolation,
                                                            extrapolation_max_slip=o.extrapolation_max_slip,
-                                                           deep_curve=o.body_sum_curve))
+                                                           deep_curve=o.body_sum_curve,
+                                                           max_lateral_share=o.body_sum_lateral_share
+                                                           if o.lateral_grip else 0.0))
         self._body_sum_history: deque[tuple[float, float]] = deque()
         self._body_force_doubt = 0.0   # the newest row's (`PhysicalSample.body_force_doubt`)
 
@@ -52,17 +54,19 @@ class BodySumReport:
             history.popleft()
         return (max(m for _, m in history) - min(m for _, m in history)) / max(mu_max, 0.05)
 
-    def _body_confidence(self, mu_max: float, drift: float, fit: BodySumResult, doubt: float) -> tuple[float, float]:
+    def _body_confidence(self, mu_max: float, drift: float, fit: BodySumResult, doubt: float,
+                         lateral_doubt: float = 0.0) -> tuple[float, float]:
         """(confidence, σ²) of a body fit's `mu_max`: the probability of μ_max within
         `confidence_band` under a normal error of σ² = `body_sum_mismatch`² + `drift`² + (the
         accelerometer's and the drag's `doubt` over μ_max)²/3 + (`misfit_peak_ratio` × the
         residuals' rise, if positive)² + (`body_sum_curve_error_ratio` × the free curve's standard
-        error)², less what corrupted input costs."""
+        error)² + `lateral_doubt`²/3 (as the wheels' fit counts it, `_with_lateral_grip`), less
+        what corrupted input costs."""
         o = self.options
         rise = o.misfit_peak_ratio * max(fit.rise_share, 0.0)
         curve = o.body_sum_curve_error_ratio * fit.curve_se_share
         spread2 = (o.body_sum_mismatch ** 2 + drift ** 2 + (doubt / max(mu_max, 0.05)) ** 2 / 3.0 + rise ** 2
-                   + curve ** 2)
+                   + curve ** 2 + lateral_doubt ** 2 / 3.0)
         confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
         return confidence * input_quality.confidence_factor(self._input_share), spread2
 
@@ -97,13 +101,16 @@ class BodySumReport:
         if fit is None:
             return None
         mu_max = max(fit.mu_max, self._body_floor(now_s))   # (no road gives less than the car just used)
+        # In a turn the sum's peak is what the lateral force leaves of the road's (`_turning`).
+        _, mu_max = self._with_lateral_grip((mu_max,) * N_WHEELS, mu_max)
+        lateral_doubt = self._lateral_doubt
         drift = self._body_drift(self._body_sum_history, now_s, mu_max)
         if speed < o.peak_evidence_min_speed:
             # A stop ending, where slips are no evidence: a VALID standing is held, as the
             # wheels' fit's; without one, this stop's last fit stands, CONVERGING (`_starved`),
             # not the prior: the wheels were braked past the slip excursion NOT_EXCITED denies.
             return self._starved(now_s, speed)
-        confidence, spread2 = self._body_confidence(mu_max, drift, fit, self._body_force_doubt)
+        confidence, spread2 = self._body_confidence(mu_max, drift, fit, self._body_force_doubt, lateral_doubt)
         detail = {"body_sum": 1.0, "body_sum_rms": fit.rms_share, "body_sum_rise": fit.rise_share,
                   "body_sum_curve_se": fit.curve_se_share,
                   "body_sum_spanning": float(sum(fit.spans)), "body_sum_rows": float(fit.rows)}

@@ -194,6 +194,8 @@ class LugreTROptions:
     # in the confidence. (`lateral_grip` off: the longitudinal peak as it is.)
     lateral_grip: bool = True
     lateral_mu_tolerance: float = 0.03
+    # The body sum (`body_sum_fit`) in a turn, by the same circle, up to this lateral share of its peak.
+    body_sum_lateral_share: float = 0.5
     axle_balance_time_constant: float = 2.0   # s; 0 disables the front/rear brake-gain balance
     axle_balance_limit: float = 0.3
     # μ is measured as a mean over the slips a wheel swept within the derivative filter's window

@@ -137,11 +137,11 @@ def test_the_estimator_publishes_the_free_curve_where_the_wheels_run_deep():
 
 
 def test_a_valid_from_the_curve_goes_at_once_when_the_curve_stops_showing_the_peak():
-    """Deep ABS cycles, then the car steered into a turn (lateral μ 0.2: the sum no longer holds
-    all the grip the tyres use). A VALID between two ABS cycles is held for one
-    (`excitation_hold_s`); one from the free curve, whose window spans several cycles, goes at the
-    first fit that no longer shows its peak."""
-    samples = body_samples(magic_formula, threshold_abs_slips, seconds=3.0, lateral_of=lambda t: 0.2 * (t >= 2.0))
+    """Deep ABS cycles, then the car steered hard into a turn (lateral μ 0.6, past half the peak
+    the sum shows: the friction circle no longer gives the road's back). A VALID between two ABS
+    cycles is held for one (`excitation_hold_s`); one from the free curve, whose window spans
+    several cycles, goes at the first fit that no longer shows its peak."""
+    samples = body_samples(magic_formula, threshold_abs_slips, seconds=3.0, lateral_of=lambda t: 0.6 * (t >= 2.0))
     estimator = LugreTrustRegionEstimator()
     estimates, reasons = [], []
     for sample in samples:
@@ -187,6 +187,26 @@ def test_a_free_curve_under_what_the_car_used_within_its_window_is_below_the_flo
     assert estimator._body_fit_floor(static) == estimator._stop_floor() > 0.6
     used = 0.6 * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
     assert estimator._body_fit_floor(curve) == pytest.approx(used * (1.0 - o.stop_floor_tolerance))
+
+
+
+def test_in_a_turn_the_friction_circle_gives_the_roads_peak_back():
+    """A turn at lateral μ 0.35 on a road of peak 0.9: each tyre has √(1 − (0.35/0.9)²) of its
+    longitudinal curve left, the sum's peak 8 % under the road's. The report adds the lateral μ
+    back; with `lateral_grip` off the sum in a turn shows nothing."""
+    peak, _ = peak_of(magic_formula)
+    lateral = 0.35
+    left = math.sqrt(1.0 - (lateral / peak) ** 2)
+    samples = body_samples(lambda slip: left * magic_formula(slip), threshold_abs_slips, lateral_of=lambda t: lateral)
+    estimator = LugreTrustRegionEstimator()
+    estimates = [estimator.update(s) for s in samples]
+    valid = [e for e in estimates if e.status == Status.VALID]
+    assert len(valid) > 0.3 * len(estimates)
+    assert all(abs(e.mu_max / peak - 1.0) < 0.05 for e in valid)
+    straight_only = LugreTrustRegionEstimator(LugreTROptions(lateral_grip=False))
+    without = [straight_only.update(s) for s in samples]
+    assert Status.VALID not in {e.status for e in without}
+    assert straight_only.not_valid_reason.endswith("(turning)")
 
 
 def wheel_and_body_samples(curve, slips_of, wheel_scale=1.0, wheel_noise=0.12, seconds=3.0, seed=7):

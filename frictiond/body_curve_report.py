@@ -14,7 +14,8 @@ deep windows (`body_sum_report`); here it is a second source, read only in windo
 run mostly deep past the peak (a threshold ABS; where they stay near it, the fall past the top
 rests on few rows, and on the development campaign's slip and deceleration controllers the curve
 read changes of road and split μ as peaks), and published only where it shows the peak with VALID's
-confidence, the wheels' fit is not VALID, and that fit puts the peak near the curve's.
+confidence, the wheels' fit is not VALID, and that fit puts the peak near the curve's. In a turn
+both are read by the friction circle (`EstimateReport._lateral_grip`).
 """
 from __future__ import annotations
 
@@ -30,7 +31,9 @@ class BodyCurveReport:
     where the wheels' fit gives none (`_beside_body_curve`)."""
 
     def _init_body_curve(self) -> None:
-        self._body_curve = self._new_body_fit(BodySumOptions(deep_only=True))
+        o = self.options
+        self._body_curve = self._new_body_fit(BodySumOptions(
+            deep_only=True, max_lateral_share=o.body_sum_lateral_share if o.lateral_grip else 0.0))
         self._body_curve_history: deque[tuple[float, float]] = deque()
 
     def _clear_body_curve(self) -> None:
@@ -57,17 +60,19 @@ class BodyCurveReport:
         if fit is None or fit.verdict:
             self._body_curve_history.clear()
             return estimate
-        drift = self._body_drift(self._body_curve_history, now_s, fit.mu_max)
-        confidence, spread2 = self._body_confidence(fit.mu_max, drift, fit, sample.body_force_doubt)
+        # (in a turn, by the friction circle, as the wheels' estimate it is compared with)
+        _, mu_max, lateral_doubt = self._lateral_grip((fit.mu_max,) * N_WHEELS, fit.mu_max)
+        drift = self._body_drift(self._body_curve_history, now_s, mu_max)
+        confidence, spread2 = self._body_confidence(mu_max, drift, fit, sample.body_force_doubt, lateral_doubt)
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
-        if (not confidence >= threshold or not fit.mu_max >= self._stop_floor()
-                or not self._agrees_with_wheels(estimate, fit.mu_max)):
+        if (not confidence >= threshold or not mu_max >= self._stop_floor()
+                or not self._agrees_with_wheels(estimate, mu_max)):
             return estimate
         detail = dict(estimate.detail or {})
         detail.update({"body_curve": 1.0, "body_sum_curve_se": fit.curve_se_share, "body_sum_rows": float(fit.rows)})
-        valid = FrictionEstimate(now_s, Status.VALID, fit.mu_max, fit.slip_star, estimate.theta, confidence,
-                                 (fit.mu_max,) * N_WHEELS, fit.mu_max * math.sqrt(spread2), detail)
+        valid = FrictionEstimate(now_s, Status.VALID, mu_max, fit.slip_star, estimate.theta, confidence,
+                                 (mu_max,) * N_WHEELS, mu_max * math.sqrt(spread2), detail)
         self._not_valid = ""
         self._last_valid = valid
         self._last_excited_s = now_s

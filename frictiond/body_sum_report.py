@@ -102,8 +102,7 @@ class BodySumReport:
             return None
         mu_max = max(fit.mu_max, self._body_floor(now_s))   # (no road gives less than the car just used)
         # In a turn the sum's peak is what the lateral force leaves of the road's (`_turning`).
-        _, mu_max = self._with_lateral_grip((mu_max,) * N_WHEELS, mu_max)
-        lateral_doubt = self._lateral_doubt
+        _, mu_max, lateral_doubt = self._lateral_grip((mu_max,) * N_WHEELS, mu_max)
         drift = self._body_drift(self._body_sum_history, now_s, mu_max)
         if speed < o.peak_evidence_min_speed:
             # A stop ending, where slips are no evidence: a VALID standing is held, as the

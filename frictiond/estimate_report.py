@@ -199,24 +199,27 @@ class EstimateReport:
         return wheel_mu, max(mu_max, sum(share * m for share, m in zip(self._load_share, wheel_mu)))
 
     def _with_lateral_grip(self, wheel_mu: tuple, mu_max: float) -> tuple[tuple, float]:
+        """`_lateral_grip`'s peaks and μ_max; sets `_lateral_doubt` to its doubt."""
+        wheel_mu, mu_max, self._lateral_doubt = self._lateral_grip(wheel_mu, mu_max)
+        return wheel_mu, mu_max
+
+    def _lateral_grip(self, wheel_mu: tuple, mu_max: float) -> tuple[tuple, float, float]:
         """The wheels' longitudinal peaks and μ_max as the road's grip: with the tyres carrying the
         lateral μ of a turn as well, √(μ_x² + μ_y²) each (the friction circle; a tyre whose
         lateral grip differs from its longitudinal one, an ellipse, is left to the model's
-        mismatch). Sets `_lateral_doubt`: the share of μ_max that adding a lateral μ smaller by
+        mismatch); and the share of μ_max that adding a lateral μ smaller by
         `lateral_mu_tolerance` would not have added (all of what was added while the lateral μ is
         within that of nothing; 0 straight ahead, as before the turn)."""
         o = self.options
         lateral = self._lateral_mu
         if not o.lateral_grip or lateral <= 0.0 or mu_max <= 0.0:
-            self._lateral_doubt = 0.0
-            return wheel_mu, mu_max
+            return wheel_mu, mu_max, 0.0
         share = self._load_share
         low = max(lateral - o.lateral_mu_tolerance, 0.0)
         mu_low = sum(s * math.hypot(m, low) for s, m in zip(share, wheel_mu))
         wheel_mu = tuple(math.hypot(m, lateral) for m in wheel_mu)
         mu_max = sum(s * m for s, m in zip(share, wheel_mu))
-        self._lateral_doubt = (mu_max - mu_low) / mu_max
-        return wheel_mu, mu_max
+        return wheel_mu, mu_max, (mu_max - mu_low) / mu_max
 
     def _restate(self, last: FrictionEstimate, now_s: float, slipping: bool) -> FrictionEstimate:
         """The last (CONVERGING) fit again, at a cycle without usable samples.

@@ -209,10 +209,13 @@ def test_in_a_turn_the_friction_circle_gives_the_roads_peak_back():
     assert straight_only.not_valid_reason.endswith("(turning)")
 
 
-def wheel_and_body_samples(curve, slips_of, wheel_scale=1.0, wheel_noise=0.12, seconds=3.0, seed=7):
+def wheel_and_body_samples(curve, slips_of, wheel_scale=1.0, wheel_noise=0.12, seconds=3.0, seed=7, lateral=0.0):
     """A car whose wheels' torques are known: each wheel's μ as its torque balance reads it (times
     `wheel_scale`, with `wheel_noise`: a derivative filter's noise under ABS, enough to keep the
-    wheels' fit from VALID), and the body's μ from the accelerometer."""
+    wheels' fit from VALID), and the body's μ from the accelerometer; in a turn at `lateral` μ,
+    what the friction circle leaves of the curve."""
+    peak, _ = peak_of(curve)
+    curve = (lambda c, left: lambda slip: left * c(slip))(curve, math.sqrt(1.0 - (lateral / peak) ** 2))
     rng = np.random.default_rng(seed)
     out = []
     for k in range(int(seconds * RATE_HZ)):
@@ -223,7 +226,7 @@ def wheel_and_body_samples(curve, slips_of, wheel_scale=1.0, wheel_noise=0.12, s
         out.append(PhysicalSample(time_s=t, speed_mps=25.0 - 5.0 * t, slip=tuple(slips.tolist()),
                                   mu_used=tuple(mus.tolist()), normal_force_n=tuple(LOADS.tolist()),
                                   tyre_force_n=tuple((mus * LOADS).tolist()), usable=(True,) * 4, braking=True,
-                                  lateral_mu=0.0, body_force_mu=body, wheel_torques_unknown=False))
+                                  lateral_mu=lateral, body_force_mu=body, wheel_torques_unknown=False))
     return out
 
 
@@ -251,3 +254,17 @@ def test_beside_a_wheels_fit_that_agrees_the_free_curve_gives_the_valid():
     assert sum(status == Status.VALID for status, _, _ in alone) < len(from_curve)
     low_wheels = wheel_and_body_samples(magic_formula, threshold_abs_slips, wheel_scale=0.65)
     assert not any(curve for _, curve, _ in statuses_and_sources(LugreTrustRegionEstimator(), low_wheels))
+
+
+def test_beside_a_wheels_fit_in_a_turn_the_curve_is_read_by_the_friction_circle():
+    """The same in a turn at lateral μ 0.35: both sources read the longitudinal curve 8 % under the
+    road's, and both add the lateral μ back, so the curve's VALID is the road's peak. With
+    `lateral_grip` off the curve says "turning" and gives none."""
+    peak, _ = peak_of(magic_formula)
+    samples = wheel_and_body_samples(magic_formula, threshold_abs_slips, lateral=0.35)
+    beside = statuses_and_sources(LugreTrustRegionEstimator(), samples)
+    from_curve = [mu for status, curve, mu in beside if status == Status.VALID and curve]
+    assert len(from_curve) > 30
+    assert all(abs(mu / peak - 1.0) < 0.05 for mu in from_curve)
+    straight_only = statuses_and_sources(LugreTrustRegionEstimator(LugreTROptions(lateral_grip=False)), samples)
+    assert not any(curve for _, curve, _ in straight_only)

@@ -238,17 +238,24 @@ def statuses_and_sources(estimator, samples):
     return out
 
 
+def curve_valids_near_the_peak(samples, within):
+    """The free curve's VALID outputs beside the wheels' fit over `samples` (more than 30, each
+    within `within` of the Magic Formula tyre's peak)."""
+    peak, _ = peak_of(magic_formula)
+    beside = statuses_and_sources(LugreTrustRegionEstimator(), samples)
+    from_curve = [mu for status, curve, mu in beside if status == Status.VALID and curve]
+    assert len(from_curve) > 30
+    assert all(abs(mu / peak - 1.0) < within for mu in from_curve)
+    return from_curve
+
+
 def test_beside_a_wheels_fit_that_agrees_the_free_curve_gives_the_valid():
     """Threshold-ABS cycles on a sharp Magic Formula tyre, the wheels' μ too noisy for their fit
     to be VALID: the car's total force shows the peak, and where the wheels' fit puts it within
     15 %, the curve's estimate is VALID. Off, or with the wheels reading 35 % low (a fit that
     disagrees), it is not."""
-    peak, _ = peak_of(magic_formula)
     samples = wheel_and_body_samples(magic_formula, threshold_abs_slips)
-    beside = statuses_and_sources(LugreTrustRegionEstimator(), samples)
-    from_curve = [mu for status, curve, mu in beside if status == Status.VALID and curve]
-    assert len(from_curve) > 30
-    assert all(abs(mu / peak - 1.0) < 0.1 for mu in from_curve)
+    from_curve = curve_valids_near_the_peak(samples, within=0.1)
     alone = statuses_and_sources(LugreTrustRegionEstimator(LugreTROptions(body_curve_beside_wheels=False)), samples)
     assert not any(curve for _, curve, _ in alone)
     assert sum(status == Status.VALID for status, _, _ in alone) < len(from_curve)
@@ -260,11 +267,7 @@ def test_beside_a_wheels_fit_in_a_turn_the_curve_is_read_by_the_friction_circle(
     """The same in a turn at lateral μ 0.35: both sources read the longitudinal curve 8 % under the
     road's, and both add the lateral μ back, so the curve's VALID is the road's peak. With
     `lateral_grip` off the curve says "turning" and gives none."""
-    peak, _ = peak_of(magic_formula)
     samples = wheel_and_body_samples(magic_formula, threshold_abs_slips, lateral=0.35)
-    beside = statuses_and_sources(LugreTrustRegionEstimator(), samples)
-    from_curve = [mu for status, curve, mu in beside if status == Status.VALID and curve]
-    assert len(from_curve) > 30
-    assert all(abs(mu / peak - 1.0) < 0.05 for mu in from_curve)
+    curve_valids_near_the_peak(samples, within=0.05)
     straight_only = statuses_and_sources(LugreTrustRegionEstimator(LugreTROptions(lateral_grip=False)), samples)
     assert not any(curve for _, curve, _ in straight_only)

@@ -31,9 +31,7 @@ class BodyCurveReport:
     where the wheels' fit gives none (`_beside_body_curve`)."""
 
     def _init_body_curve(self) -> None:
-        o = self.options
-        self._body_curve = self._new_body_fit(BodySumOptions(
-            deep_only=True, max_lateral_share=o.body_sum_lateral_share if o.lateral_grip else 0.0))
+        self._body_curve = self._new_body_fit(BodySumOptions(deep_only=True))
         self._body_curve_history: deque[tuple[float, float]] = deque()
 
     def _clear_body_curve(self) -> None:

@@ -282,9 +282,8 @@ class BodySumFit:
         o = self.options
         curve = curve or fit_curve_sum(slips, shares, body)
         star = curve.slip_star
-        period = float(np.median(np.diff(times)))
-        rms_share = (_block_rms(curve_sum(curve.values, slips, shares) - body, o.misfit_block_s / max(period, 1e-6))
-                     / max(curve.mu_max, 1e-6))
+        rows_per_block = o.misfit_block_s / max(float(np.median(np.diff(times))), 1e-6)
+        rms_share = _block_rms(curve_sum(curve.values, slips, shares) - body, rows_per_block) / max(curve.mu_max, 1e-6)
         below = (slips <= SPAN_BELOW * star).mean(axis=0)
         past = (slips >= SPAN_PAST * star).mean(axis=0)
         spans = (below >= o.span_share) & (past >= o.span_share)
@@ -298,8 +297,8 @@ class BodySumFit:
             verdict = ""
             self._last_curve = curve
         self._log_thetas = x
-        rows_per_block = max(1, int(round(o.misfit_block_s / max(period, 1e-6))))
-        utilisation = float(np.convolve(body, np.full(rows_per_block, 1.0 / rows_per_block), "valid").max())
+        k = max(1, int(round(rows_per_block)))   # (as `_block_rms` counts a block)
+        utilisation = float(np.convolve(body, np.full(k, 1.0 / k), "valid").max())
         return BodySumResult(curve.mu_max, star, (star,) * N_WHEELS, float(np.exp(x).mean()), rms_share, 0.0,
                              tuple(spans.tolist()), lateral_mu, len(body), verdict, curve.se_share, utilisation)
 

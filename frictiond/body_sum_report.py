@@ -11,6 +11,7 @@ wheels' fit counts the data above its curve: the peak lies beyond the fit by abo
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 
@@ -30,16 +31,17 @@ class BodySumReport:
         o = self.options
         self._body_sum = self._new_body_fit(BodySumOptions(peak_extrapolation=o.peak_extrapolation,
                                                            extrapolation_max_slip=o.extrapolation_max_slip,
-                                                           deep_curve=o.body_sum_curve,
-                                                           max_lateral_share=o.body_sum_lateral_share
-                                                           if o.lateral_grip else 0.0))
+                                                           deep_curve=o.body_sum_curve))
         self._body_sum_history: deque[tuple[float, float]] = deque()
         self._body_force_doubt = 0.0   # the newest row's (`PhysicalSample.body_force_doubt`)
 
     def _new_body_fit(self, fit_options: BodySumOptions) -> BodySumFit:
         """A fit of the car's total force on the estimator's priors: the static curve's shape, θ
-        and its bounds, the sides' coupling."""
+        and its bounds, the sides' coupling; read in a turn up to `body_sum_lateral_share` of its
+        peak where the reports add the lateral μ back (`lateral_grip`)."""
         o = self.options
+        fit_options = dataclasses.replace(fit_options,
+                                          max_lateral_share=o.body_sum_lateral_share if o.lateral_grip else 0.0)
         shape = LugreParams(sigma0=o.prior_sigma0, sigma2=o.prior_sigma2, mu_c=o.mu_c, mu_s=o.mu_s, v_s=o.prior_v_s,
                             alpha=o.alpha, patch_length=o.patch_length)
         return BodySumFit(shape, o.prior_theta, o.prior_std_log_theta, (o.theta_min, o.theta_max),

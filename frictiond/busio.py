@@ -206,18 +206,12 @@ class LogFrames:
         if path.suffix.lower() == ".log":
             yield from self._candump()
             return
-        keep_ids = self.keep_ids
         reader = can.LogReader(str(path))
         try:
             for msg in reader:
                 frame = message_to_frame(msg)
-                if self.first_time_s is None:
-                    self.first_time_s = frame.time_s
-                self.last_time_s = frame.time_s
-                if keep_ids is not None and _is_unrelated(frame, keep_ids):
-                    self.skipped += 1
-                    continue
-                yield frame
+                if self._kept(frame):
+                    yield frame
         finally:
             stop = getattr(reader, "stop", None)
             if stop is not None:
@@ -258,19 +252,24 @@ class LogFrames:
                     return
 
     def _with_slow_lines(self, items: list[Frame | str]) -> Iterator[Frame]:
-        keep_ids = self.keep_ids
         for item in items:
             if type(item) is str:
                 frame = _candump_line_slow(item.strip())
-                if self.first_time_s is None:
-                    self.first_time_s = frame.time_s
-                self.last_time_s = frame.time_s
-                if keep_ids is not None and _is_unrelated(frame, keep_ids):
-                    self.skipped += 1
-                    continue
-                yield frame
+                if self._kept(frame):
+                    yield frame
             else:
                 yield item
+
+    def _kept(self, frame: Frame) -> bool:
+        """Whether a frame built one by one is yielded (`keep_ids`); its time bounds the file's
+        span either way, and a frame left out counts in `skipped`."""
+        if self.first_time_s is None:
+            self.first_time_s = frame.time_s
+        self.last_time_s = frame.time_s
+        if self.keep_ids is not None and _is_unrelated(frame, self.keep_ids):
+            self.skipped += 1
+            return False
+        return True
 
 
 def read_log(path: str | Path) -> Iterator[Frame]:

@@ -11,8 +11,8 @@ from frictiond import not_valid
 from frictiond import tyre_model as tm
 from frictiond.baseline_rls import BurckhardtRLSEstimator, burckhardt_peak
 from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
-from frictiond.peak_evidence import CONTRADICTED, REAR_CROSSING
 from frictiond.samples import FrictionEstimate, PhysicalSample, Status
+from frictiond.wheel_verdicts import CONTRADICTED, REAR_CROSSING
 
 
 def braking(curves, *, v0=25.0, slip_scale=1.0, noise=0.02, seed=0, duration=None, speed_floor=4.0,
@@ -1030,14 +1030,14 @@ def test_a_change_of_road_under_the_front_axle_alone_costs_confidence(monkeypatc
     speed that slip can be measured at (from 1.85 s, where the rear axle meets the dry road
     unseen) is held at that confidence. Since the rear wheels show no peak for a wheelbase
     after a detected change (one at 1.43 s here), their wet-road data excite nothing either."""
-    from frictiond import peak_evidence, road_change
+    from frictiond import road_change, wheel_verdicts
 
     def confidences(front_test: bool, rear_crossing: bool) -> list[float]:
         with monkeypatch.context() as patch:
             if not front_test:
                 patch.setattr(road_change.RoadChangeTest, "_front_score", lambda self, *bias: 0.0)
             if not rear_crossing:
-                patch.setattr(peak_evidence.PeakEvidence, "_rear_axle_crossing", lambda self: False)
+                patch.setattr(wheel_verdicts.WheelVerdicts, "_rear_axle_crossing", lambda self: False)
             stop, estimates = campaign_stop_estimates(50431, family="*/*/jump")
         moving = [e.confidence for e in estimates if 1.5 <= e.time_s <= 1.85]
         assert moving

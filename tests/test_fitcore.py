@@ -680,7 +680,7 @@ def _random_spread(rng, slip: np.ndarray) -> np.ndarray:
 def test_top_elasticity_compiled_equals_numpy():
     # Random windows: some wheels with too few samples, slips with ties (a quantile on a tie),
     # since before, inside and after the window.
-    from frictiond.peak_evidence import _top_elasticity_numpy
+    from frictiond.wheel_verdicts import _top_elasticity_numpy
 
     rng = np.random.default_rng(12)
     defined = 0
@@ -701,7 +701,7 @@ def test_top_elasticity_compiled_equals_numpy():
 def test_top_elasticity_standard_error_is_the_slopes():
     # μ = a + b·λ + noise over one wheel's top slips: the elasticity is b·λ̄/μ̄ and its standard
     # error the regression's, which shrinks as the slips spread and grows with the noise.
-    from frictiond.peak_evidence import _top_elasticity_numpy
+    from frictiond.wheel_verdicts import _top_elasticity_numpy
 
     rng = np.random.default_rng(3)
     errors = {}
@@ -728,7 +728,7 @@ def test_top_elasticity_standard_error_is_the_slopes():
 def test_top_elasticity_smear_is_the_filter_sweep_over_the_top_slips_spread(sweep):
     # Every sample's μ averaged over slips ± `sweep` around its own, with weights ¼ at each end:
     # the rms sweep is sweep·√½, against the top slips' own standard deviation.
-    from frictiond.peak_evidence import _top_elasticity_numpy
+    from frictiond.wheel_verdicts import _top_elasticity_numpy
 
     rng = np.random.default_rng(5)
     n = 120

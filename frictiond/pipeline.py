@@ -12,6 +12,7 @@ from typing import Any, Callable
 
 from . import input_quality
 from .codec import DecodedInput, DecodeFailure, InputCodec, InputMessage, OutputCodec, load_databases
+from .compensated_samples import CompensatedSamples
 from .config import Config
 from .cycle_times import CycleTimeProbe
 from .frames import Frame
@@ -78,7 +79,7 @@ class PipelineStats:
         return sum(self.undecodable.values())
 
 
-class Pipeline:
+class Pipeline(CompensatedSamples):
     """Feeds frames through codec, front end and estimator; returns the frames to send."""
 
     def __init__(self, config: Config, estimator: Any | None = None) -> None:
@@ -280,42 +281,48 @@ class Pipeline:
             else:
                 estimate = replace(prev, time_s=time_s)
         else:
-            if result.fault is not None:
-                self.stats.faults[result.fault] += 1
-                self._recent_faults.append(time_s)
-            self.last_sample = result.sample
-            if result.sample.braking and self.front_end.wheel_torques_unknown:
-                self.stats.unmeasured[WHEEL_TORQUES_UNKNOWN] += 1
-            estimate = self.estimator.update(result.sample)
-            while self._recent_faults and self._recent_faults[0] < time_s - FAULT_WINDOW_S:
-                self._recent_faults.popleft()
-            if result.dead_wheels:
-                self.stats.faults["wheel speed dead"] += 1
-            self._corrupt_input = input_quality.leaves_valid(result.sample.input_suspect_share, self._corrupt_input)
-            if len(self._recent_faults) >= FAULTS_FOR_STATUS:
-                # Glitches the front end could repair, but so many that the input itself is
-                # suspect (a failing sensor, a spoofing node): say so instead of VALID.
-                estimate = replace(estimate, status=Status.FAULT, confidence=0.0)
-            elif result.dead_wheels:
-                # A wheel-speed sensor reads zero while the car rolls: that wheel is out of the
-                # fit; what the others give is reported, but not promised (not VALID).
-                estimate = replace(estimate, status=Status.CONVERGING if estimate.status == Status.VALID
-                                   else estimate.status, confidence=min(estimate.confidence, DEAD_WHEEL_CONFIDENCE))
-            elif self._corrupt_input and estimate.status == Status.VALID:
-                # Too much of the input was rejected as corrupt: what got through may bend the
-                # estimate (the summary and the monitor say so).
-                self.stats.not_valid[input_quality.REASON] += 1
-                estimate = replace(estimate, status=Status.CONVERGING,
-                                   confidence=min(estimate.confidence, input_quality.CAPPED_CONFIDENCE))
-            elif estimate.status == Status.VALID:
-                self._last_valid = estimate
-            elif result.sample.braking:
-                self._count_not_valid(estimate)
+            estimate = self._estimate_from_sample(time_s, result)
         self.last_estimate = estimate
         frames = self._emit(time_s, estimate, self.last_sample)
         if frames and self.on_estimate is not None:
             self.on_estimate(estimate, self.last_sample)
         return frames
+
+    def _estimate_from_sample(self, time_s: float, result: FrontEndResult) -> FrictionEstimate:
+        """The estimator's update on the front end's sample, its status lowered where the input is
+        in doubt: many repaired faults (FAULT), a dead wheel-speed sensor or much corrupt input."""
+        if result.fault is not None:
+            self.stats.faults[result.fault] += 1
+            self._recent_faults.append(time_s)
+        self.last_sample = result.sample
+        if result.sample.braking and self.front_end.wheel_torques_unknown:
+            self.stats.unmeasured[WHEEL_TORQUES_UNKNOWN] += 1
+        estimate = self.estimator.update(result.sample)
+        while self._recent_faults and self._recent_faults[0] < time_s - FAULT_WINDOW_S:
+            self._recent_faults.popleft()
+        if result.dead_wheels:
+            self.stats.faults["wheel speed dead"] += 1
+        self._corrupt_input = input_quality.leaves_valid(result.sample.input_suspect_share, self._corrupt_input)
+        if len(self._recent_faults) >= FAULTS_FOR_STATUS:
+            # Glitches the front end could repair, but so many that the input itself is
+            # suspect (a failing sensor, a spoofing node): say so instead of VALID.
+            estimate = replace(estimate, status=Status.FAULT, confidence=0.0)
+        elif result.dead_wheels:
+            # A wheel-speed sensor reads zero while the car rolls: that wheel is out of the
+            # fit; what the others give is reported, but not promised (not VALID).
+            estimate = replace(estimate, status=Status.CONVERGING if estimate.status == Status.VALID
+                               else estimate.status, confidence=min(estimate.confidence, DEAD_WHEEL_CONFIDENCE))
+        elif self._corrupt_input and estimate.status == Status.VALID:
+            # Too much of the input was rejected as corrupt: what got through may bend the
+            # estimate (the summary and the monitor say so).
+            self.stats.not_valid[input_quality.REASON] += 1
+            estimate = replace(estimate, status=Status.CONVERGING,
+                               confidence=min(estimate.confidence, input_quality.CAPPED_CONFIDENCE))
+        elif estimate.status == Status.VALID:
+            self._last_valid = estimate
+        elif result.sample.braking:
+            self._count_not_valid(estimate)
+        return estimate
 
     @property
     def not_valid_reason(self) -> str:
@@ -335,34 +342,6 @@ class Pipeline:
             reason = getattr(self.estimator, "not_valid_reason", "")
             if reason:
                 self.stats.estimator_not_valid[reason] += 1
-
-    def _compensated(self, time_s: float, result: FrontEndResult) -> FrontEndResult:
-        """The front end's result with the sample the estimator is to see: each one sample late,
-        corrected for the tyre's relaxation lag (`relaxation`); none at the first of a run."""
-        if result.sample is None:
-            held = self.relaxation.flush()
-            # The last sample before a short gap still counts; after a silence it describes a
-            # road the car has left (an estimate of it now would be a stale VALID).
-            if (held is not None and not result.stale_messages and result.fault is None
-                    and time_s - held.time_s <= self.config.frontend.max_gap):
-                return replace(result, sample=self._marked_if_tainted(held))
-            return result
-        compensated = self.relaxation.push(result.sample)
-        if compensated is None or time_s - compensated.time_s > self.config.frontend.max_gap:
-            # (the first of a run: warming up; a held sample from before a silence is dropped)
-            if result.fault is not None:
-                self.stats.faults[result.fault] += 1
-            return replace(result, sample=None, fault=None)
-        if compensated is not result.sample:
-            compensated = self._marked_if_tainted(compensated)
-        return result if compensated is result.sample else replace(result, sample=compensated)
-
-    def _marked_if_tainted(self, held: PhysicalSample) -> PhysicalSample:
-        """A sample held back (`_compensated`): when meanwhile an input value it used was found to
-        be a spike (`FrontEnd.tainted`), it is not fitted and gives no floor."""
-        if not self.front_end.tainted(held.time_s):
-            return held
-        return replace(held, usable=(False, False, False, False), body_mu=math.nan)
 
     def _emit(self, time_s: float, estimate: FrictionEstimate, sample: PhysicalSample | None) -> list[Frame]:
         stats = self.stats

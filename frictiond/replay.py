@@ -69,9 +69,15 @@ class ReplaySummary:
         return {Status(s).name: n * period for s, n in sorted(self.stats.status_updates.items())}
 
     def format(self, truth_path: str | None = None) -> str:
+        """The summary as text, a line a kind; with `truth_path`, the simulator's μ_max at the end."""
+        return "\n".join(self._count_lines() + self._input_lines() + self._status_lines()
+                         + self._final_lines(truth_path))
+
+    def _count_lines(self) -> list[str]:
+        """What was read, ignored, updated and written, and the time in each status."""
         s = self.stats
         span = (self.last_time_s - self.first_time_s) if self.first_time_s is not None else 0.0
-        lines = [
+        return [
             f"frames read       {s.frames_read}  ({span:.2f} s of log)",
             f"input frames      {s.input_frames}",
             f"ignored frames    {s.ignored_frames}  (not inputs"
@@ -86,6 +92,11 @@ class ReplaySummary:
             f"frames written    {s.frames_out}",
             "time in status    " + ", ".join(f"{k} {v:.2f} s" for k, v in self.status_seconds().items()),
         ]
+
+    def _input_lines(self) -> list[str]:
+        """What the replay found of its inputs: their cycle times, the frames rejected or left
+        unjoined, and what the front end learnt of the sensors and tyres."""
+        lines: list[str] = []
         measured = self.measured_trigger_period_s
         if self.period_mismatch and measured is not None:
             lines.append(f"cycle time        wheel speeds every {1e3 * measured:.1f} ms, the DBC says "
@@ -113,6 +124,12 @@ class ReplaySummary:
         if self.relaxation_m > 0.0:
             lines.append(f"tyre lag          relaxation length {self.relaxation_m:.2f} m learnt from the μ–slip loops, "
                          "corrected before the fit")
+        return lines
+
+    def _status_lines(self) -> list[str]:
+        """The faults, and why the estimate was not VALID or no wheel's μ measured, in time."""
+        s = self.stats
+        lines: list[str] = []
         if s.faults:
             lines.append("faults            " + "; ".join(f"{k}: {v}" for k, v in s.faults.most_common(5)))
         if s.not_valid:
@@ -128,6 +145,11 @@ class ReplaySummary:
             lines.append("no wheel μ        " + "; ".join(
                 f"{v * self.update_period_s:.2f} s: {k}"
                 for k, v in s.unmeasured.most_common()))
+        return lines
+
+    def _final_lines(self, truth_path: str | None) -> list[str]:
+        """The final estimate and, with `truth_path`, the simulator's μ_max at the end."""
+        lines: list[str] = []
         f = self.final
         if f is not None:
             wheels = " ".join(f"{w} {m:.3f}" for w, m in zip(WHEELS, f.wheel_mu_max))
@@ -141,7 +163,7 @@ class ReplaySummary:
             if truth and f is not None:
                 last = truth[-1]
                 lines.append(f"truth at end      mu_max {last['mu_max']:.3f}")
-        return "\n".join(lines)
+        return lines
 
 
 def replay_frames(

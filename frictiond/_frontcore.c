@@ -558,8 +558,8 @@ enum {
 #define FAULT_WIND 5.0           /* body_equation.FAULT_WIND_MPS */
 #define ACCEL_BIAS_LEARNT_SAMPLES 50
 #define ACCEL_BIAS_PRIOR_SAMPLES 2.0
-#define SENSOR_OFFSET_PRIOR_S 0.2      /* body_equation.SENSOR_OFFSET_PRIOR_S */
-#define SENSOR_OFFSET_LIMIT 1.0        /* body_equation.SENSOR_OFFSET_LIMIT_MPS2 */
+#define SENSOR_OFFSET_PRIOR_S 0.2      /* brake_gain.SENSOR_OFFSET_PRIOR_S */
+#define SENSOR_OFFSET_LIMIT 1.0        /* brake_gain.SENSOR_OFFSET_LIMIT_MPS2 */
 #define PRESSURE_SENSOR_LAG 0.04
 #define MAX_PRESSURE_LAG 0.05
 #define MIN_PRESSURE_LAG 0.002
@@ -1002,7 +1002,7 @@ static double rolling_offset_prior(const FEState *s, const double *k, double *me
     return py_min(tolerance, py_max(BODY_ACCEL_TOLERANCE, width));
 }
 
-/* body_equation.gain_and_sensor_offset: the brake gain (returned) and the accelerometer's offset
+/* brake_gain.gain_and_sensor_offset: the brake gain (returned) and the accelerometer's offset
  * (*offset) of N = G·T − M·R·s by least squares with a prior of s = prior_offset (half-width
  * prior_width), and what s may be off by. */
 static double gain_and_sensor_offset(const FEState *s, double prior_samples, double mass_radius, double tolerance,
@@ -1031,7 +1031,7 @@ static double gain_and_sensor_offset(const FEState *s, double prior_samples, dou
     return (s->gain_tn + mass_radius * *offset * s->gain_t) / s->gain_tt;
 }
 
-/* body_equation.gain_within_offset_ambiguity: the middle of what the gain limits (1 ± limits) and
+/* brake_gain.gain_within_offset_ambiguity: the middle of what the gain limits (1 ± limits) and
  * the body equation (gain ± ambiguity) both allow, its half-width into *doubt. */
 static double gain_within_offset_ambiguity(double gain, double limits, double ambiguity, double *doubt)
 {
@@ -1145,7 +1145,7 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
             sensed = s->sensed_needed + (needed - s->sensed_needed) * -expm1(-elapsed / lag);
         s->sensed_needed = sensed;
         s->sensed_needed_time = now;
-        /* (body_equation.BodyEquation._learn_brake_gain) */
+        /* (brake_gain.BrakeGain._learn_brake_gain) */
         const int level = k[K_LEVEL_ROAD] != 0.0;
         const double mass_radius = k[K_MASS] * k[K_RADIUS], band = level ? 0.0 : mass_radius * SENSOR_OFFSET_LIMIT;
         const double keep = 1.0 - py_min(1.0, k[K_SAMPLE_PERIOD] / py_max(k[K_GAIN_TAU], 1e-3));
@@ -1166,7 +1166,7 @@ static void update_brake_gain(FEState *s, const double *k, double accel_long, do
                                           k[K_ACCEL_TOLERANCE], prior_offset, prior_width, &s->sensor_offset,
                                           &s->sensor_offset_doubt);
         }
-        /* (body_equation.BodyEquation._unlearnt_offset_torque_nm) */
+        /* (brake_gain.BrakeGain._unlearnt_offset_torque_nm) */
         const double doubt = s->sensor_offset_doubt;
         const double ambiguity = doubt > 0.0 && s->recent_brake > 0.0
             ? mass_radius * doubt / py_max(s->recent_brake / py_max(s->recent_weight, 1e-9), 1e-9)

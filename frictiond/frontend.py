@@ -137,7 +137,7 @@ class FrontEndOptions:
     # then teaches the accelerometer's own offset, and the body equation takes it as known. Off (a
     # car on public roads): what free rolling teaches includes gravity's share on a grade, which
     # the brakes and the tyres' loads do not feel; the offset they see is told from the brakes'
-    # gain by the body equation itself (`body_equation.gain_and_sensor_offset`).
+    # gain by the body equation itself (`brake_gain.gain_and_sensor_offset`).
     level_road: bool = False
     # How far the longitudinal accelerometer may read off the contact and air forces, m/s² (its
     # offset and the tilt of its mounting: 1° is 0.17): the prior of the offset the body equation

@@ -96,7 +96,7 @@ def reports():
 def test_a_grade_the_front_end_is_not_told_of_costs_validity_not_accuracy(label):
     # The default front end does not take the roads as level: what free rolling teaches of the
     # accelerometer may be a grade, and the offset the brakes' check uses is only told from their
-    # gain as the stop goes (`body_equation.gain_and_sensor_offset`). On the simulator's level
+    # gain as the stop goes (`brake_gain.gain_and_sensor_offset`). On the simulator's level
     # roads that costs no accuracy and no false VALID; VALID over most of the span where the
     # deceleration is large against the sensor's tolerance (0.3 m/s²), none on ice (0.3 m/s²).
     scenario, model, ref = CASES[label]

@@ -8,7 +8,7 @@ import random
 
 import pytest
 
-from frictiond.body_equation import gain_and_sensor_offset, gain_within_offset_ambiguity
+from frictiond.brake_gain import gain_and_sensor_offset, gain_within_offset_ambiguity
 from frictiond.free_rolling_offset import ACCEL_BIAS_LEARNT_SAMPLES, offset_doubt_mps2
 from frictiond.frontend import (
     DRIVE_TORQUE_NAMES,

@@ -14,7 +14,8 @@ deep windows (`body_sum_report`); here it is a second source, read only in windo
 run mostly deep past the peak (a threshold ABS; where they stay near it, the fall past the top
 rests on few rows, and on the development campaign's slip and deceleration controllers the curve
 read changes of road and split μ as peaks), and published only where it shows the peak with VALID's
-confidence, the wheels' fit is not VALID, and that fit puts the peak near the curve's. In a turn
+confidence above the grip the car used within its window (`_body_fit_floor`), the wheels' fit is
+not VALID, and that fit puts the peak near the curve's. In a turn
 both are read by the friction circle (`EstimateReport._lateral_grip`).
 """
 from __future__ import annotations
@@ -64,7 +65,7 @@ class BodyCurveReport:
         confidence, spread2 = self._body_confidence(mu_max, drift, fit, sample.body_force_doubt, lateral_doubt)
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
-        if (not confidence >= threshold or not mu_max >= self._stop_floor()
+        if (not confidence >= threshold or not mu_max >= self._body_fit_floor(fit)
                 or not self._agrees_with_wheels(estimate, mu_max)):
             return estimate
         detail = dict(estimate.detail or {})

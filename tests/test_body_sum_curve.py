@@ -10,7 +10,7 @@ import pytest
 from frictiond.body_sum_curve import AT_EDGE, DRIFTING, FEW_ROWS, NO_FALL, NOT_IN_BOTH_HALVES, fit_curve_sum
 from frictiond.body_sum_fit import CURVE_LOST, BodySumResult
 from frictiond.estimator import LugreTROptions, LugreTrustRegionEstimator
-from frictiond.samples import PhysicalSample, Status
+from frictiond.samples import FrictionEstimate, PhysicalSample, Status
 
 RATE_HZ = 100
 LOADS = np.array([4800.0, 4800.0, 3200.0, 3200.0])
@@ -271,3 +271,25 @@ def test_beside_a_wheels_fit_in_a_turn_the_curve_is_read_by_the_friction_circle(
     curve_valids_near_the_peak(samples, within=0.05)
     straight_only = statuses_and_sources(LugreTrustRegionEstimator(LugreTROptions(lateral_grip=False)), samples)
     assert not any(curve for _, curve, _ in straight_only)
+
+
+@pytest.mark.parametrize("used_in_window, valid", [(0.45, True), (0.7, False)])
+def test_beside_a_wheels_fit_the_curve_is_held_to_the_grip_used_within_its_window(used_in_window, valid):
+    """The same rule beside the wheels' fit: the car used 0.9 earlier in the stop (another road,
+    the change unseen by the wheels' fit), the free curve shows a peak of 0.5, the wheels' fit
+    agrees (CONVERGING at 0.52). The stop's floor would bar it; what bounds it is the grip used
+    among the curve's own rows."""
+    estimator = LugreTrustRegionEstimator()
+    for k in range(10):
+        estimator._body_mu.push(0.01 * k, 0.9)
+    assert estimator._stop_floor() > 0.6
+    fit = BodySumResult(0.5, 0.1, (0.1,) * 4, 1.0, 0.01, 0.0, (True,) * 4, 0.0, 100, "",
+                        curve_se_share=0.01, window_utilisation=used_in_window)
+    estimator._body_curve.result = lambda now_s, speed: fit
+    wheels = FrictionEstimate(1.0, Status.CONVERGING, 0.52, 0.1, 1.0, 0.3)
+    sample = PhysicalSample(time_s=1.0, speed_mps=20.0, slip=(0.1,) * 4, mu_used=(0.5,) * 4,
+                            normal_force_n=tuple(LOADS.tolist()), tyre_force_n=(0.0,) * 4, usable=(True,) * 4,
+                            braking=True, body_force_mu=0.5, wheel_torques_unknown=False)
+    out = estimator._beside_body_curve(wheels, sample)
+    assert (out.status == Status.VALID) is valid
+    assert out.mu_max == (0.5 if valid else 0.52)

@@ -79,7 +79,7 @@ class _Window:
         """Move the window's samples to the front of the columns."""
         n = len(self)
         s, e = self.start, self.end
-        for arr in (self.slip, self.speed, self.mu, self.time, self.wheel, self.lam_v, self.pow_lam_v, self.stiff):
+        for arr in self.append_columns:
             arr[:n] = arr[s:e]
         self.spread[:, :n] = self.spread[:, s:e]
         self.rows[:, :n] = self.rows[:, s:e]

@@ -65,7 +65,7 @@ class BodyCurveReport:
         confidence, spread2 = self._body_confidence(mu_max, drift, fit, sample.body_force_doubt, lateral_doubt)
         last = self._last_estimate
         threshold = o.keep_valid_confidence if last is not None and last.status == Status.VALID else o.valid_confidence
-        if (not confidence >= threshold or not mu_max >= self._body_fit_floor(fit)
+        if (not confidence >= threshold or not mu_max >= self._body_fit_floor(fit, sample.body_force_doubt)
                 or not self._agrees_with_wheels(estimate, mu_max)):
             return estimate
         detail = dict(estimate.detail or {})

@@ -72,19 +72,20 @@ class BodySumReport:
         confidence = math.erf(o.confidence_band / math.sqrt(2.0 * spread2)) if spread2 > 0.0 else 1.0
         return confidence * input_quality.confidence_factor(self._input_share), spread2
 
-    def _body_fit_floor(self, fit: BodySumResult) -> float:
+    def _body_fit_floor(self, fit: BodySumResult, doubt: float) -> float:
         """The least μ_max VALID allows a body fit, here and beside the wheels' fit
-        (`body_curve_report`): the stop's floor (`_stop_floor`), or for the free curve the same
-        rule on the utilisation within its own window. The stop's floor guards against a fit that
-        has forgotten the peak the car used, its wheels held deep in slip since; a free curve that
-        shows the peak has its top read in both halves of its window (`body_sum_curve`), so that
-        peak is in its rows, and what the car used before them may have been another road's (dev
-        stops 172 and 490: the grip used on a dry road held a wet road's curve, within 2 % of the
-        truth, from VALID for the rest of the stop; 40703 beside the wheels' fit, whose test
+        (`body_curve_report`): the stop's floor (`_stop_floor`), or for the free curve the same rule
+        on the utilisation within its own window, less `doubt` (the accelerometer's and the drag's
+        for the newest row, `PhysicalSample.body_force_doubt`). The stop's floor guards against a
+        fit that has forgotten the peak the car used, its wheels held deep in slip since; a free
+        curve that shows the peak has its top read in both halves of its window (`body_sum_curve`),
+        so that peak is in its rows, and what the car used before them may have been another road's
+        (dev stops 172 and 490: the grip used on a dry road held a wet road's curve, within 2 % of
+        the truth, from VALID for the rest of the stop; 40703 beside the wheels' fit, whose test
         missed the change from snow to ice, an ice curve within 1 %)."""
         if fit.curve_se_share <= 0.0:
             return self._stop_floor()
-        used = self._less_accelerometer_margins(fit.window_utilisation - self._body_force_doubt)
+        used = self._less_accelerometer_margins(fit.window_utilisation - doubt)
         return used * (1.0 - self.options.stop_floor_tolerance)
 
     def _clear_body_sum(self) -> None:
@@ -128,7 +129,7 @@ class BodySumReport:
                 return self._hold(now_s, speed)
             self._not_valid = not_valid.body_sum_reason(fit.verdict)
             confidence = 0.0
-        elif mu_max < self._body_fit_floor(fit):
+        elif mu_max < self._body_fit_floor(fit, self._body_force_doubt):
             self._not_valid = not_valid.BELOW_STOP_FLOOR
             confidence = min(confidence, 0.5 * threshold)
         elif confidence < threshold:

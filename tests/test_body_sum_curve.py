@@ -177,16 +177,18 @@ def test_grip_used_on_a_road_before_the_curves_window_does_not_hold_its_peak_fro
 
 def test_a_free_curve_under_what_the_car_used_within_its_window_is_below_the_floor():
     """The floor a body fit must reach: the stop's for the static curve, the window's own
-    utilisation (less the accelerometer's margins and the tolerance) for the free curve."""
+    utilisation, less the accelerometer's and the drag's doubt it is given, the accelerometer's
+    margins and the tolerance, for the free curve."""
     estimator = LugreTrustRegionEstimator()
     o = estimator.options
     static = BodySumResult(0.5, 0.1, (0.1,) * 4, 1.0, 0.0, 0.0, (True,) * 4, 0.0, 100, "")
     curve = dataclasses.replace(static, curve_se_share=0.02, window_utilisation=0.6)
     for k in range(10):
         estimator._body_mu.push(0.01 * k, 0.9)
-    assert estimator._body_fit_floor(static) == estimator._stop_floor() > 0.6
-    used = 0.6 * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
-    assert estimator._body_fit_floor(curve) == pytest.approx(used * (1.0 - o.stop_floor_tolerance))
+    assert estimator._body_fit_floor(static, 0.04) == estimator._stop_floor() > 0.6
+    for doubt in (0.0, 0.04):
+        used = (0.6 - doubt) * (1.0 - o.body_floor_relative_margin) - o.body_floor_margin
+        assert estimator._body_fit_floor(curve, doubt) == pytest.approx(used * (1.0 - o.stop_floor_tolerance))
 
 
 
@@ -273,13 +275,16 @@ def test_beside_a_wheels_fit_in_a_turn_the_curve_is_read_by_the_friction_circle(
     assert not any(curve for _, curve, _ in straight_only)
 
 
-@pytest.mark.parametrize("used_in_window, valid", [(0.45, True), (0.7, False)])
-def test_beside_a_wheels_fit_the_curve_is_held_to_the_grip_used_within_its_window(used_in_window, valid):
+@pytest.mark.parametrize("used_in_window, doubt, valid", [(0.45, 0.0, True), (0.7, 0.0, False), (0.62, 0.02, True),
+                                                           (0.62, 0.0, False)])
+def test_beside_a_wheels_fit_the_curve_is_held_to_the_grip_used_within_its_window(used_in_window, doubt, valid):
     """The same rule beside the wheels' fit: the car used 0.9 earlier in the stop (another road,
     the change unseen by the wheels' fit), the free curve shows a peak of 0.5, the wheels' fit
     agrees (CONVERGING at 0.52). The stop's floor would bar it; what bounds it is the grip used
-    among the curve's own rows."""
+    among the curve's own rows, less this sample's accelerometer and drag doubt (not a doubt
+    left from a stop the body sum read: 0.1 here)."""
     estimator = LugreTrustRegionEstimator()
+    estimator._body_force_doubt = 0.1
     for k in range(10):
         estimator._body_mu.push(0.01 * k, 0.9)
     assert estimator._stop_floor() > 0.6
@@ -289,7 +294,7 @@ def test_beside_a_wheels_fit_the_curve_is_held_to_the_grip_used_within_its_windo
     wheels = FrictionEstimate(1.0, Status.CONVERGING, 0.52, 0.1, 1.0, 0.3)
     sample = PhysicalSample(time_s=1.0, speed_mps=20.0, slip=(0.1,) * 4, mu_used=(0.5,) * 4,
                             normal_force_n=tuple(LOADS.tolist()), tyre_force_n=(0.0,) * 4, usable=(True,) * 4,
-                            braking=True, body_force_mu=0.5, wheel_torques_unknown=False)
+                            braking=True, body_force_mu=0.5, wheel_torques_unknown=False, body_force_doubt=doubt)
     out = estimator._beside_body_curve(wheels, sample)
     assert (out.status == Status.VALID) is valid
     assert out.mu_max == (0.5 if valid else 0.52)

@@ -15,8 +15,8 @@ run mostly deep past the peak (a threshold ABS; where they stay near it, the fal
 rests on few rows, and on the development campaign's slip and deceleration controllers the curve
 read changes of road and split μ as peaks), and published only where it shows the peak with VALID's
 confidence above the grip the car used within its window (`_body_fit_floor`), the wheels' fit is
-not VALID, and that fit puts the peak near the curve's. In a turn
-both are read by the friction circle (`EstimateReport._lateral_grip`).
+not VALID, and that fit puts the peak near the curve's. In a turn both are read by the friction
+circle (`EstimateReport._lateral_grip`).
 """
 from __future__ import annotations
 
